@@ -1,0 +1,49 @@
+# shapebag: `make help` lists the commands.
+PY      ?= python3
+VENV    ?= .venv
+BIN     := $(VENV)/bin
+DATA    ?= var/data
+PORT    ?= 8000
+DATASET ?= ../shared/datasets/shrec11-simplified
+
+.DEFAULT_GOAL := help
+.PHONY: help install run serve test test-fast lint format evaluate bench docker-test clean
+
+help:  ## list the commands
+	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-12s %s\n", $$1, $$2}'
+
+$(BIN)/shapebag: pyproject.toml
+	test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	$(BIN)/pip install -q -e '.[dev]'
+	@touch $@
+
+install: $(BIN)/shapebag  ## create .venv and install shapebag with its dev tools
+
+run: install  ## quick start: generate + ingest a synthetic corpus, then serve on 127.0.0.1:$(PORT)
+	$(BIN)/shapebag demo --data-dir $(DATA) --port $(PORT)
+
+serve: install  ## serve an existing data directory
+	$(BIN)/shapebag serve --data-dir $(DATA) --port $(PORT)
+
+test: install  ## run the whole test suite (what CI runs)
+	$(BIN)/pytest -q
+
+test-fast: install  ## the suite without slow (dataset-wide, multi-process) tests
+	$(BIN)/pytest -q -m "not slow and not docker"
+
+lint: install  ## ruff
+	$(BIN)/ruff check app tests benchmarks
+
+format: install  ## ruff format + autofix
+	$(BIN)/ruff check --fix app tests benchmarks
+	$(BIN)/ruff format app tests benchmarks
+
+evaluate: install  ## Table 2 on SHREC'11 (DATASET=...)
+	$(BIN)/shapebag evaluate $(DATASET)
+
+bench: install  ## short benchmark suite (prints tables, writes results/*.json)
+	$(BIN)/python -m benchmarks.run --short
+
+clean:  ## remove caches (keeps .venv and data)
+	rm -rf .pytest_cache .ruff_cache .mypy_cache results .cache

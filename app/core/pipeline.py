@@ -1,0 +1,121 @@
+"""describe(mesh) -> ShapeDescription: the whole per-shape computation, done once per mesh.
+
+The description keeps the full normalised HKS h(x) (n, m), not just p(x), so every descriptor run
+and every vocabulary can be applied later without recomputing eigenpairs.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from app.core import hks as hks_mod
+from app.core.keypoints import KeypointFilter, detect
+from app.core.laplacian import cotangent_laplacian
+from app.core.mesh import Mesh, normalize_scale, to_resolution
+from app.core.spectrum import smallest_eigenpairs
+
+DESCRIPTION_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class DescribeParams:
+    """Parameters of the per-shape computation (those that change h(x) or the keypoints)."""
+
+    k: int = 300  # eigenpairs
+    m: int = 100  # time scales
+    target_vertices: int = 1000  # canonical resolution; 0 keeps the input resolution
+    solver: str = "auto"  # auto | dense | sparse
+    keypoint_filter: KeypointFilter = field(default_factory=KeypointFilter)
+
+    def fingerprint(self) -> str:
+        """A stable string naming these parameters (cache keys)."""
+        d = asdict(self)
+        f = d.pop("keypoint_filter")
+        parts = [f"{k}={v}" for k, v in sorted(d.items()) if k != "solver"]
+        parts += [f"kf.{k}={v}" for k, v in sorted(f.items())]
+        return ";".join(parts)
+
+
+@dataclass(frozen=True)
+class ShapeDescription:
+    """What the index needs of one shape.
+
+    hks         : (n, m) float32, normalised HKS h(x) (eq. 4) at the canonical resolution
+    weights     : (n,) float32, lumped vertex areas of the unit-area mesh (sum = 1)
+    keypoints   : (n,) bool, filtered feature points
+    eigenvalues : (k,) float64, of the unit-area mesh (Shape-DNA comes for free)
+    input_vertices : vertex count of the mesh as given
+    seconds     : per-stage wall time
+    """
+
+    hks: np.ndarray
+    weights: np.ndarray
+    keypoints: np.ndarray
+    eigenvalues: np.ndarray
+    input_vertices: int
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self.hks.shape[0])
+
+    def save(self, path: str | Path) -> None:
+        """Write a .npz (no pickle)."""
+        with open(path, "wb") as fh:
+            np.savez_compressed(
+                fh, hks=self.hks, weights=self.weights, keypoints=self.keypoints,
+                eigenvalues=self.eigenvalues, input_vertices=np.int64(self.input_vertices),
+                format=np.int64(DESCRIPTION_FORMAT),
+            )
+
+    @classmethod
+    def load(cls, path: str | Path) -> ShapeDescription:
+        with np.load(path, allow_pickle=False) as z:
+            if int(z["format"]) != DESCRIPTION_FORMAT:
+                raise ValueError(f"description format {int(z['format'])} is not {DESCRIPTION_FORMAT}")
+            return cls(
+                hks=z["hks"], weights=z["weights"], keypoints=z["keypoints"].astype(bool),
+                eigenvalues=z["eigenvalues"], input_vertices=int(z["input_vertices"]),
+            )
+
+
+def describe(mesh: Mesh, params: DescribeParams | None = None) -> ShapeDescription:
+    """Mesh (already validated and cleaned by mesh.load_mesh) -> ShapeDescription."""
+    params = params or DescribeParams()
+    clock = _Clock()
+    work = normalize_scale(to_resolution(mesh, params.target_vertices))
+    work = normalize_scale(work)  # resampling changes the area slightly: renormalise
+    clock.lap("resample")
+    stiffness, mass = cotangent_laplacian(work.vertices, work.faces)
+    clock.lap("laplacian")
+    spectrum = smallest_eigenpairs(stiffness, mass, params.k, method=params.solver)
+    clock.lap("eigen")
+    times = hks_mod.time_scales(spectrum.eigenvalues, params.m)
+    raw = hks_mod.heat_kernel_signature(spectrum, times)
+    h = hks_mod.normalize(raw)
+    clock.lap("hks")
+    mask = detect(raw, work.faces, params.keypoint_filter)
+    clock.lap("keypoints")
+    return ShapeDescription(
+        hks=h.astype(np.float32),
+        weights=mass.diagonal().astype(np.float32),
+        keypoints=mask,
+        eigenvalues=spectrum.eigenvalues,
+        input_vertices=mesh.n_vertices,
+        seconds=clock.laps,
+    )
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.laps: dict[str, float] = {}
+        self._t = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.laps[name] = now - self._t
+        self._t = now

@@ -1,0 +1,184 @@
+"""Geometric vocabulary (k-means) and Bag of Features encoding (the paper's eqs. 5–8).
+
+A Vocabulary is frozen once fit: its centres and metadata are saved as a plain .npy + .json pair
+(never pickle) and versioned by the service.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+from sklearn.cluster import KMeans
+
+from app.core.descriptor import DEFAULT_RUN, dimension, select
+from app.core.pipeline import ShapeDescription
+
+VOCABULARY_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class EncodeParams:
+    """How a description becomes a BoF vector.
+
+    mode           : "hard" (eq. 6, default) or "soft" (eq. 5)
+    sigma_scale    : soft VQ width, as a multiple of the vocabulary's typical quantisation distance
+    keypoints_only : integrate over the filtered keypoints instead of all vertices (eq. 8)
+    area_weighted  : weight each vertex by its area (eq. 7 as an integral) instead of 1 (eq. 8)
+    normalize      : divide F by the total weight, so F does not depend on the vertex count
+    """
+
+    mode: str = "hard"
+    sigma_scale: float = 1.0
+    keypoints_only: bool = False
+    area_weighted: bool = False
+    normalize: bool = True
+
+
+@dataclass(frozen=True)
+class Vocabulary:
+    """centers : (v, d) float32 geometric words; metadata says how they were made."""
+
+    centers: np.ndarray
+    run: str = DEFAULT_RUN
+    sigma: float = 1.0  # median distance of training descriptors to their word
+    metadata: dict = field(default_factory=dict)
+
+    @property
+    def size(self) -> int:
+        return int(self.centers.shape[0])
+
+    @classmethod
+    def fit(
+        cls,
+        descriptions: Sequence[ShapeDescription],
+        size: int = 64,
+        run: str = DEFAULT_RUN,
+        seed: int = 0,
+        keypoints_only: bool = True,
+        metadata: dict | None = None,
+    ) -> Vocabulary:
+        """k-means over the p(x) of the keypoints (or of every vertex) of `descriptions`."""
+        feats = training_features(descriptions, run, keypoints_only)
+        return cls.fit_features(feats, size=size, run=run, seed=seed, metadata=metadata)
+
+    @classmethod
+    def fit_features(
+        cls, features: np.ndarray, size: int = 64, run: str = DEFAULT_RUN, seed: int = 0,
+        metadata: dict | None = None,
+    ) -> Vocabulary:
+        """features : (N, d) -> Vocabulary of `size` words."""
+        features = np.asarray(features, dtype=np.float64)
+        if features.ndim != 2 or features.shape[1] != dimension(run):
+            raise ValueError(f"features must be (N, {dimension(run)}) for {run}, got {features.shape}")
+        unique = np.unique(features.round(12), axis=0).shape[0]
+        if unique < size:
+            raise ValueError(f"{unique} distinct descriptors cannot make {size} words")
+        km = KMeans(n_clusters=size, n_init=4, random_state=seed).fit(features)
+        centers = km.cluster_centers_.astype(np.float32)
+        dist = np.linalg.norm(features - km.cluster_centers_[km.labels_], axis=1)
+        sigma = float(np.median(dist)) or float(dist.mean()) or 1.0
+        meta = {
+            "format": VOCABULARY_FORMAT,
+            "size": size,
+            "run": run,
+            "dimension": dimension(run),
+            "trained_on_descriptors": int(features.shape[0]),
+            "seed": seed,
+            "inertia": float(km.inertia_),
+            "created_at": datetime.now(UTC).isoformat(timespec="seconds"),
+        }
+        meta.update(metadata or {})
+        return cls(centers=centers, run=run, sigma=sigma, metadata=meta)
+
+    def encode(self, description: ShapeDescription, params: EncodeParams | None = None) -> np.ndarray:
+        """(v,) float32 BoF vector F(X) of one shape."""
+        params = params or EncodeParams()
+        p = select(description.hks, self.run)  # (n, d)
+        weights = description.weights.astype(np.float64) if params.area_weighted else np.ones(len(p))
+        if params.keypoints_only:
+            p, weights = p[description.keypoints], weights[description.keypoints]
+        theta = self.quantize(p, params)  # (n, v)
+        bof = weights @ theta  # eq. 8: Σ_x w(x) θ(x)
+        if params.normalize and weights.sum() > 0:
+            bof = bof / weights.sum()
+        return bof.astype(np.float32)
+
+    def quantize(self, p: np.ndarray, params: EncodeParams | None = None) -> np.ndarray:
+        """(n, d) descriptors -> (n, v) feature distributions θ(x), rows summing to 1."""
+        params = params or EncodeParams()
+        sq = _squared_distances(p, self.centers)  # (n, v)
+        if params.mode == "hard":  # eq. 6
+            theta = np.zeros_like(sq)
+            theta[np.arange(len(sq)), sq.argmin(axis=1)] = 1.0
+            return theta
+        if params.mode == "soft":  # eq. 5, normalised to sum 1 per vertex
+            sigma = params.sigma_scale * self.sigma
+            logits = -(sq - sq.min(axis=1, keepdims=True)) / (2.0 * sigma * sigma)
+            theta = np.exp(logits)
+            return theta / theta.sum(axis=1, keepdims=True)
+        raise ValueError(f"unknown quantisation mode {params.mode!r}; use 'hard' or 'soft'")
+
+    def save(self, directory: str | Path) -> Path:
+        """Write centers.npy + vocabulary.json into `directory`, atomically (temp dir, then rename)."""
+        directory = Path(directory)
+        directory.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{directory.name}.", dir=directory.parent))
+        np.save(tmp / "centers.npy", self.centers, allow_pickle=False)
+        meta = dict(self.metadata, run=self.run, sigma=self.sigma, size=self.size)
+        (tmp / "vocabulary.json").write_text(json.dumps(meta, indent=2, sort_keys=True))
+        for f in tmp.iterdir():
+            with open(f, "rb") as fh:
+                os.fsync(fh.fileno())
+        if directory.exists():
+            raise FileExistsError(f"{directory} exists: vocabularies are immutable")
+        os.rename(tmp, directory)
+        return directory
+
+    @classmethod
+    def load(cls, directory: str | Path) -> Vocabulary:
+        directory = Path(directory)
+        meta = json.loads((directory / "vocabulary.json").read_text())
+        centers = np.load(directory / "centers.npy", allow_pickle=False).astype(np.float32)
+        if centers.ndim != 2 or centers.shape[0] != meta["size"] or centers.shape[1] != dimension(meta["run"]):
+            raise ValueError(f"vocabulary at {directory} is inconsistent: centers {centers.shape}")
+        return cls(centers=centers, run=meta["run"], sigma=float(meta["sigma"]), metadata=meta)
+
+    def describe_meta(self) -> dict:
+        return dict(self.metadata, run=self.run, sigma=self.sigma, size=self.size)
+
+
+def training_features(
+    descriptions: Sequence[ShapeDescription], run: str = DEFAULT_RUN, keypoints_only: bool = True
+) -> np.ndarray:
+    """(N, d) stacked p(x) of the keypoints (or all vertices) of every description."""
+    parts = []
+    for d in descriptions:
+        p = select(d.hks, run)
+        parts.append(p[d.keypoints] if keypoints_only else p)
+    if not parts:
+        raise ValueError("no descriptions to fit a vocabulary on")
+    return np.concatenate(parts, axis=0)
+
+
+def _squared_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n, d), (v, d) -> (n, v) squared Euclidean distances."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    sq = (a * a).sum(1)[:, None] - 2.0 * a @ b.T + (b * b).sum(1)[None, :]
+    return np.maximum(sq, 0.0)
+
+
+def l1_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """L1 (Manhattan) distances between BoF vectors: (n, v), (q, v) -> (n, q); eq. 9 with ‖·‖₁."""
+    return np.abs(np.asarray(a)[:, None, :] - np.asarray(b)[None, :, :]).sum(axis=2)
+
+
+def params_dict(params: EncodeParams) -> dict:
+    return asdict(params)
