@@ -1,0 +1,70 @@
+"""FaissL1Index: IndexIDMap2 over IndexFlat(dim, METRIC_L1); exact L1 search, ids = model ids."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import faiss
+import numpy as np
+
+from app.index.base import IndexFileError, as_ids, as_vectors
+from app.storage.blobs import atomic_write
+
+
+class FaissL1Index:
+    def __init__(self, dim: int, index: faiss.Index | None = None) -> None:
+        self.dim = dim
+        self._index = index if index is not None else faiss.IndexIDMap2(faiss.IndexFlat(dim, faiss.METRIC_L1))
+
+    @property
+    def count(self) -> int:
+        return int(self._index.ntotal)
+
+    def ids(self) -> np.ndarray:
+        return np.sort(faiss.vector_to_array(self._index.id_map).astype(np.int64))
+
+    def add(self, ids: np.ndarray, vectors: np.ndarray) -> None:
+        ids, vectors = as_ids(ids), as_vectors(vectors, self.dim)
+        if len(ids) != len(vectors):
+            raise ValueError(f"{len(ids)} ids for {len(vectors)} vectors")
+        if len(np.unique(ids)) != len(ids):
+            raise ValueError("duplicate ids in one add")
+        self.remove(ids)  # IndexIDMap2 would keep both copies of a re-added id
+        self._index.add_with_ids(vectors, ids)
+
+    def remove(self, ids: np.ndarray) -> int:
+        ids = as_ids(ids)
+        if len(ids) == 0 or self.count == 0:
+            return 0
+        return int(self._index.remove_ids(faiss.IDSelectorBatch(ids)))
+
+    def search(
+        self, vectors: np.ndarray, k: int, allowed_ids: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        q = as_vectors(vectors, self.dim)
+        if k <= 0:
+            raise ValueError("k must be positive")
+        if self.count == 0 or (allowed_ids is not None and len(allowed_ids) == 0):
+            return np.full((len(q), k), np.inf, np.float32), np.full((len(q), k), -1, np.int64)
+        params = None
+        if allowed_ids is not None:
+            params = faiss.SearchParameters(sel=faiss.IDSelectorBatch(as_ids(allowed_ids)))
+        dist, ids = self._index.search(q, k, params=params)
+        dist = np.where(ids < 0, np.inf, dist).astype(np.float32)
+        return dist, ids.astype(np.int64)
+
+    def save(self, path: Path) -> None:
+        atomic_write(Path(path), lambda tmp: faiss.write_index(self._index, str(tmp)))
+
+    @classmethod
+    def load(cls, path: Path) -> FaissL1Index:
+        path = Path(path)
+        if not path.is_file():
+            raise IndexFileError(f"no index file at {path}")
+        try:
+            index = faiss.read_index(str(path))
+        except RuntimeError as exc:
+            raise IndexFileError(f"unreadable index file {path}: {str(exc).splitlines()[0]}") from exc
+        if not isinstance(index, faiss.IndexIDMap2) or index.metric_type != faiss.METRIC_L1:
+            raise IndexFileError(f"{path} is not an IndexIDMap2 with the L1 metric")
+        return cls(index.d, index)
