@@ -1,0 +1,242 @@
+"""The evaluation harness: Table 2 (NN FT ST E DCG mAP d) of a labelled folder, every shape a query.
+
+One call describes every mesh once (worker processes, on-disk cache, see evaluation_cache), then
+for each row fits a vocabulary on the folder's keypoint descriptors, encodes every shape, ranks by
+L1 distance and scores with app.core.metrics. Baselines (Shape-DNA, D2) run in the same loop on the
+same shapes. Variant lines measure what a deployed service meets, each against its clean, fit-on-DIR
+line (Δ mAP): a frozen vocabulary (`vocabulary`), a vocabulary fit on half of the classes
+(`fit_on="half"`), and noisy queries against a clean database (`noise`, the paper's Fig. 3).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from app.core import metrics
+from app.core.baselines import D2_BINS, SHAPE_DNA_COUNT, euclidean_distance, l1_distance, shape_dna
+from app.core.descriptor import RUNS, dimension
+from app.core.keypoints import KeypointFilter
+from app.core.pipeline import DescribeParams, ShapeDescription
+from app.core.vocabulary import EncodeParams, Vocabulary
+from app.core.vocabulary import l1_distance as bof_l1
+from app.services import evaluation_cache as cache_mod
+from app.services.evaluation_report import RowResult
+
+PRESETS: tuple[str, ...] = ("paper",)  # run5 at the raw input resolution, as the paper computes it
+BASELINES: tuple[str, ...] = ("shape-dna", "d2")
+ROW_NAMES: tuple[str, ...] = RUNS + PRESETS + BASELINES
+DEFAULT_CACHE = Path(".cache/describe")
+
+
+class EvaluationError(ValueError):
+    """The evaluation cannot run as asked; the message says why."""
+
+
+@dataclass(frozen=True)
+class EvaluationOptions:
+    rows: tuple[str, ...] = ROW_NAMES
+    vocabulary_size: int = 64
+    mode: str = "hard"  # hard | soft
+    keypoints_only: bool = False  # BoF over the keypoints instead of every vertex
+    keypoint_filter: bool = True
+    target_vertices: int = 1000
+    vocabulary: Path | None = None  # frozen vocabulary directory: adds a "frozen" line per row
+    fit_on: str = "all"  # all | half: "half" adds a line with a vocabulary fit on half the classes
+    noise: float = 0.0  # > 0: adds a line with noisy queries against the clean database
+    seed: int = 0
+    workers: int = 2
+    cache_dir: Path = DEFAULT_CACHE
+    progress: bool = True
+
+
+@dataclass(frozen=True)
+class Row:
+    name: str
+    kind: str  # bof | shape-dna | d2
+    describe: DescribeParams
+    run: str = "run5"
+
+
+@dataclass
+class EvaluationResult:
+    directory: str
+    shapes: int
+    classes: int
+    options: EvaluationOptions
+    rows: list[RowResult] = field(default_factory=list)
+    describe: dict = field(default_factory=dict)
+    seconds: float = 0.0
+
+
+def build_rows(options: EvaluationOptions) -> list[Row]:
+    unknown = [r for r in options.rows if r not in ROW_NAMES]
+    if unknown:
+        raise EvaluationError(f"unknown row(s) {', '.join(unknown)}; choose from {', '.join(ROW_NAMES)}")
+    flt = KeypointFilter(enabled=options.keypoint_filter)
+    base = DescribeParams(target_vertices=options.target_vertices, keypoint_filter=flt)
+    rows = []
+    for name in options.rows:
+        if name in RUNS:
+            rows.append(Row(name, "bof", base, name))
+        elif name == "paper":
+            rows.append(Row(name, "bof", replace(base, target_vertices=0), "run5"))
+        else:
+            rows.append(Row(name, name, base))
+    return rows
+
+
+def evaluate(directory: str | Path, options: EvaluationOptions | None = None) -> EvaluationResult:
+    """Describe, encode and score every shape of `directory` (labels.csv: file,class[,split])."""
+    options = options or EvaluationOptions()
+    start = time.perf_counter()
+    files, labels = _read_folder(directory)
+    rows = build_rows(options)
+    frozen = _load_frozen(options, rows)
+    if options.fit_on not in ("all", "half"):
+        raise EvaluationError(f"--fit-on must be 'all' or 'half', not {options.fit_on!r}")
+    if options.mode not in ("hard", "soft"):
+        raise EvaluationError(f"--mode must be 'hard' or 'soft', not {options.mode!r}")
+    if options.noise < 0:
+        raise EvaluationError("--noise must be >= 0")
+
+    cache = cache_mod.DescriptionCache(options.cache_dir)
+    clean, noisy = cache_mod.Variant(), cache_mod.Variant(options.noise, options.seed)
+    stats = cache_mod.DescribeStats()
+    variants = [clean] + ([noisy] if options.noise > 0 else [])
+    want_d2 = any(r.kind == "d2" for r in rows)
+    descs: dict[tuple[DescribeParams, cache_mod.Variant], list[ShapeDescription]] = {}
+    try:
+        for params in dict.fromkeys(r.describe for r in rows):
+            for variant in variants:
+                cache_mod.describe_all(files, params, cache, variant, want_d2, options.workers,
+                                       options.progress, stats)
+                descs[params, variant] = cache_mod.load_descriptions(files, params, cache, variant)
+    except cache_mod.DescribeFailure as exc:
+        raise EvaluationError(str(exc)) from exc
+
+    result = EvaluationResult(str(directory), len(files), len(set(labels.tolist())), options)
+    result.describe = _describe_summary(descs, stats)
+    for row in rows:
+        db = descs[row.describe, clean]
+        queries = descs[row.describe, noisy] if options.noise > 0 else None
+        try:
+            if row.kind == "bof":
+                result.rows += _bof_lines(row, db, queries, labels, options, frozen)
+            else:
+                d2 = {v: cache_mod.load_d2(files, cache, v) for v in variants} if row.kind == "d2" else {}
+                result.rows += _baseline_lines(row, db, queries, d2, labels, options)
+        except ValueError as exc:  # e.g. too few distinct descriptors for the vocabulary size
+            raise EvaluationError(f"row {row.name}: {exc}") from exc
+    result.seconds = time.perf_counter() - start
+    return result
+
+
+def _read_folder(directory: str | Path) -> tuple[list[tuple[Path, str]], np.ndarray]:
+    from app.datasets.folder import DatasetError, read_labelled_folder
+
+    try:
+        entries = read_labelled_folder(directory)
+    except DatasetError as exc:
+        raise EvaluationError(str(exc)) from exc
+    labels = np.array([e.label for e in entries])
+    if len(set(labels.tolist())) < 2:
+        raise EvaluationError("retrieval needs at least two classes in labels.csv")
+    files = [(e.path, cache_mod.content_sha256(e.path)) for e in entries]
+    return files, labels
+
+
+def _load_frozen(options: EvaluationOptions, rows: Sequence[Row]) -> Vocabulary | None:
+    if options.vocabulary is None:
+        return None
+    try:
+        vocab = Vocabulary.load(options.vocabulary)
+    except (OSError, ValueError, KeyError) as exc:
+        raise EvaluationError(f"cannot load the vocabulary at {options.vocabulary}: {exc}") from exc
+    wrong = [r.name for r in rows if r.kind == "bof" and r.run != vocab.run]
+    if wrong:
+        raise EvaluationError(
+            f"the vocabulary at {options.vocabulary} encodes {vocab.run}; rows {', '.join(wrong)} use "
+            f"another descriptor (pass --runs {vocab.run} plus any of {', '.join(PRESETS + BASELINES)})"
+        )
+    return vocab
+
+
+def _bof_lines(
+    row: Row, db: list[ShapeDescription], queries: list[ShapeDescription] | None, labels: np.ndarray,
+    options: EvaluationOptions, frozen: Vocabulary | None,
+) -> list[RowResult]:
+    params = EncodeParams(mode=options.mode, keypoints_only=options.keypoints_only)
+    meta = {"dataset_rows": row.name}
+    t0 = time.perf_counter()
+    vocab = Vocabulary.fit(db, size=options.vocabulary_size, run=row.run, seed=options.seed, metadata=meta)
+    main = _score_bof(row.name, row, vocab, db, db, labels, params, t0)
+    out = [main]
+    if frozen is not None:
+        name = f"{row.name} [frozen {Path(options.vocabulary or '').name}]"
+        out.append(_score_bof(name, row, frozen, db, db, labels, params, time.perf_counter(), main))
+    if options.fit_on == "half":
+        t1 = time.perf_counter()
+        classes = sorted(set(labels.tolist()))[::2]  # every other class, in name order
+        subset = [d for d, lab in zip(db, labels, strict=True) if lab in classes]
+        half = Vocabulary.fit(subset, size=options.vocabulary_size, run=row.run, seed=options.seed)
+        name = f"{row.name} [fit on {len(classes)}/{len(set(labels.tolist()))} classes]"
+        out.append(_score_bof(name, row, half, db, db, labels, params, t1, main))
+    if queries is not None:
+        name = f"{row.name} [noise {options.noise:g}]"
+        out.append(_score_bof(name, row, vocab, db, queries, labels, params, time.perf_counter(), main))
+    return out
+
+
+def _score_bof(
+    name: str, row: Row, vocab: Vocabulary, db: list[ShapeDescription], queries: list[ShapeDescription],
+    labels: np.ndarray, params: EncodeParams, t0: float, reference: RowResult | None = None,
+) -> RowResult:
+    """Encode database and queries with `vocab`; row i of the distances = query i vs the database."""
+    db_bof = np.stack([vocab.encode(d, params) for d in db])  # (N, v)
+    q_bof = db_bof if queries is db else np.stack([vocab.encode(d, params) for d in queries])
+    distances = bof_l1(q_bof, db_bof)  # (N, N)
+    scores = metrics.retrieval_scores(distances, labels)
+    return RowResult(name, "bof", scores, dimension(row.run), time.perf_counter() - t0, reference,
+                     {"run": row.run, "vocabulary_size": vocab.size, "describe": row.describe.fingerprint(),
+                      "encode": asdict(params)})
+
+
+def _baseline_lines(
+    row: Row, db: list[ShapeDescription], queries: list[ShapeDescription] | None,
+    d2: dict, labels: np.ndarray, options: EvaluationOptions,
+) -> list[RowResult]:
+    def score(name: str, q: np.ndarray, base: np.ndarray, t0: float, ref: RowResult | None) -> RowResult:
+        dist = euclidean_distance(q, base) if row.kind == "shape-dna" else l1_distance(q, base)
+        dim = SHAPE_DNA_COUNT if row.kind == "shape-dna" else D2_BINS
+        return RowResult(name, row.kind, metrics.retrieval_scores(dist, labels), dim,
+                         time.perf_counter() - t0, ref, {"describe": row.describe.fingerprint()})
+
+    t0 = time.perf_counter()
+    if row.kind == "shape-dna":  # eigenvalues of the unit-area canonical mesh: area = 1
+        base = np.stack([shape_dna(d.eigenvalues) for d in db])
+        noisy = np.stack([shape_dna(d.eigenvalues) for d in queries]) if queries is not None else None
+    else:
+        variants = list(d2)
+        base, noisy = d2[variants[0]], (d2[variants[1]] if len(variants) > 1 else None)
+    main = score(row.name, base, base, t0, None)
+    out = [main]
+    if noisy is not None:
+        out.append(score(f"{row.name} [noise {options.noise:g}]", noisy, base, time.perf_counter(), main))
+    return out
+
+
+def _describe_summary(descs: dict, stats: cache_mod.DescribeStats) -> dict:
+    per_params = {}
+    for (params, variant), ds in descs.items():
+        key = params.fingerprint() + (f" | noisy queries {variant.noise:g}" if variant.noise else "")
+        per_params[key] = {
+            "mean_vertices": float(np.mean([d.n_vertices for d in ds])),
+            "mean_keypoints": float(np.mean([d.keypoints.sum() for d in ds])),
+        }
+    return {"computed": stats.computed, "cached": stats.cached, "d2_computed": stats.d2_computed,
+            "seconds": stats.seconds, "descriptions": per_params}

@@ -1,0 +1,189 @@
+"""Describe a whole labelled folder once: worker processes fill an on-disk cache the evaluation reads.
+
+Cache layout (default .cache/describe, gitignored):
+    <root>/<sha256(DescribeParams.fingerprint())[:16]>/<file sha256>[.noise<nsr>-s<seed>].npz
+    <root>/d2-<bins>x<pairs>/<file sha256>[.noise<nsr>-s<seed>].npy
+A description depends only on the mesh bytes and the parameters, so a second run with other
+BoF settings (runs, vocabulary, hard/soft, keypoints-only) reads every description back and never
+repeats an eigen-solve. Files are written to a temporary name and renamed, so an interrupted run
+leaves no half-written entry.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from app.core.baselines import D2_BINS, D2_PAIRS, d2_histogram
+from app.core.mesh import InvalidMeshError, Mesh, load_mesh, perturb
+from app.core.pipeline import DescribeParams, ShapeDescription, describe
+from app.core.spectrum import SpectrumError
+
+
+def content_sha256(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def noise_seed(sha: str, seed: int) -> int:
+    """Per-shape noise seed: fixed by the file content, so results do not depend on file order."""
+    return (int(sha[:12], 16) + 1_000_003 * seed) % (2**63)
+
+
+@dataclass(frozen=True)
+class Variant:
+    """Which version of a mesh: clean (noise 0) or perturbed with noise-to-signal `noise`."""
+
+    noise: float = 0.0
+    seed: int = 0
+
+    def suffix(self) -> str:
+        return "" if self.noise == 0 else f".noise{self.noise:g}-s{self.seed}"
+
+
+class DescriptionCache:
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root)
+
+    def description_path(self, sha: str, params: DescribeParams, variant: Variant) -> Path:
+        key = hashlib.sha256(params.fingerprint().encode()).hexdigest()[:16]
+        return self.root / key / f"{sha}{variant.suffix()}.npz"
+
+    def d2_path(self, sha: str, variant: Variant) -> Path:
+        return self.root / f"d2-{D2_BINS}x{D2_PAIRS}" / f"{sha}{variant.suffix()}.npy"
+
+
+@dataclass(frozen=True)
+class Task:
+    path: str
+    sha: str
+    params: DescribeParams
+    variant: Variant
+    cache_root: str
+    want_description: bool
+    want_d2: bool
+
+
+@dataclass
+class DescribeStats:
+    computed: int = 0  # descriptions computed (eigen-solves) in this run
+    cached: int = 0  # descriptions read back from the cache
+    d2_computed: int = 0
+    seconds: float = 0.0
+
+
+class DescribeFailure(Exception):
+    """Some meshes of the folder could not be described; the message names them."""
+
+
+def _load_variant(path: str, sha: str, variant: Variant) -> Mesh:
+    mesh = load_mesh(path)
+    if variant.noise > 0:
+        mesh = perturb(mesh, variant.noise, noise_seed(sha, variant.seed))
+    return mesh
+
+
+def run_task(task: Task) -> str | None:
+    """Worker body: describe one mesh into the cache. Returns None, or an error message."""
+    cache = DescriptionCache(task.cache_root)
+    try:
+        mesh = _load_variant(task.path, task.sha, task.variant)
+        if task.want_description:
+            desc = describe(mesh, task.params)
+            _atomic(cache.description_path(task.sha, task.params, task.variant), desc.save)
+        if task.want_d2:
+            hist = d2_histogram(mesh, seed=0)
+            _atomic(cache.d2_path(task.sha, task.variant), lambda p: np.save(p, hist, allow_pickle=False))
+    except (InvalidMeshError, SpectrumError, ValueError) as exc:
+        return f"{task.path}: {exc}"
+    return None
+
+
+def _atomic(target: Path, write: Callable[[str], None]) -> None:
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=target.suffix, dir=target.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, target)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def _one_blas_thread() -> None:
+    """Pool initializer: the pool is the parallelism; BLAS threads inside it would oversubscribe."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1)
+
+
+def describe_all(
+    files: Sequence[tuple[Path, str]],
+    params: DescribeParams,
+    cache: DescriptionCache,
+    variant: Variant = Variant(),
+    with_d2: bool = False,
+    workers: int = 2,
+    progress: bool = True,
+    stats: DescribeStats | None = None,
+) -> DescribeStats:
+    """Make sure the cache holds a description (and D2) of every (path, sha256) in `files`.
+
+    workers <= 1 runs in this process (no pool), which keeps tests and debugging simple.
+    """
+    from tqdm import tqdm
+
+    stats = stats or DescribeStats()
+    start = time.perf_counter()
+    tasks = []
+    for path, sha in files:
+        need_desc = not cache.description_path(sha, params, variant).exists()
+        need_d2 = with_d2 and not cache.d2_path(sha, variant).exists()
+        stats.computed += need_desc
+        stats.cached += not need_desc
+        stats.d2_computed += need_d2
+        if need_desc or need_d2:
+            tasks.append(Task(str(path), sha, params, variant, str(cache.root), need_desc, need_d2))
+    label = "describe" + (f" (noise {variant.noise:g})" if variant.noise else "")
+    errors: list[str] = []
+    with tqdm(total=len(tasks), desc=label, unit="mesh", disable=not progress or not tasks) as bar:
+        if workers <= 1:
+            for task in tasks:
+                err = run_task(task)
+                errors += [err] if err else []
+                bar.update()
+        elif tasks:
+            with ProcessPoolExecutor(max_workers=workers, initializer=_one_blas_thread) as pool:
+                for fut in as_completed([pool.submit(run_task, t) for t in tasks]):
+                    err = fut.result()
+                    errors += [err] if err else []
+                    bar.update()
+    stats.seconds += time.perf_counter() - start
+    if errors:
+        shown = "; ".join(sorted(errors)[:5])
+        more = f" (and {len(errors) - 5} more)" if len(errors) > 5 else ""
+        raise DescribeFailure(f"{len(errors)} mesh(es) could not be described: {shown}{more}")
+    return stats
+
+
+def load_descriptions(
+    files: Sequence[tuple[Path, str]], params: DescribeParams, cache: DescriptionCache, variant: Variant
+) -> list[ShapeDescription]:
+    return [ShapeDescription.load(cache.description_path(sha, params, variant)) for _, sha in files]
+
+
+def load_d2(files: Sequence[tuple[Path, str]], cache: DescriptionCache, variant: Variant) -> np.ndarray:
+    """(N, bins) D2 histograms."""
+    return np.stack([np.load(cache.d2_path(sha, variant), allow_pickle=False) for _, sha in files])

@@ -1,0 +1,99 @@
+"""Table 2 as text and as JSON."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from app.core.metrics import METRICS
+
+if TYPE_CHECKING:
+    from app.services.evaluation import EvaluationResult
+
+
+@dataclass
+class RowResult:
+    """One line of the table: mean scores, descriptor length d, seconds (fit + encode + rank + score),
+    and for a variant line the clean line it is compared with (Δ mAP = this - reference)."""
+
+    name: str
+    kind: str
+    scores: dict[str, float]
+    d: int
+    seconds: float
+    reference: RowResult | None = None
+    details: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def delta_map(self) -> float | None:
+        return None if self.reference is None else self.scores["mAP"] - self.reference.scores["mAP"]
+
+
+def format_table(result: EvaluationResult) -> str:
+    """Fixed-width Table 2; mAP in % as the paper prints it."""
+    width = max([len(r.name) for r in result.rows] + [len("Row")])
+    head = f"{'Row':<{width}}  {'NN':>6} {'FT':>6} {'ST':>6} {'E':>6} {'DCG':>6} {'mAP(%)':>7} {'d':>4}"
+    head += f" {'ΔmAP':>7} {'s':>6}"
+    lines = [head, "-" * len(head)]
+    for r in result.rows:
+        s = r.scores
+        delta = "" if r.delta_map is None else f"{100 * r.delta_map:+.2f}"
+        lines.append(
+            f"{r.name:<{width}}  {s['NN']:6.3f} {s['FT']:6.3f} {s['ST']:6.3f} {s['E']:6.3f} {s['DCG']:6.3f}"
+            f" {100 * s['mAP']:7.2f} {r.d:>4} {delta:>7} {r.seconds:6.1f}"
+        )
+    ds = result.describe
+    lines.append("-" * len(head))
+    lines.append(
+        f"{result.shapes} shapes, {result.classes} classes; descriptions: {ds['computed']} computed, "
+        f"{ds['cached']} from the cache in {ds['seconds']:.1f} s; total {result.seconds:.1f} s"
+    )
+    for key, info in ds["descriptions"].items():
+        verts, kps = info["mean_vertices"], info["mean_keypoints"]
+        lines.append(f"  [{key}] mean vertices {verts:.0f}, mean keypoints {kps:.1f}")
+    return "\n".join(lines)
+
+
+def to_json(result: EvaluationResult) -> dict[str, Any]:
+    options = {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(result.options).items()}
+    rows = []
+    for r in result.rows:
+        rows.append({
+            "name": r.name,
+            "kind": r.kind,
+            **{m: _finite(r.scores[m]) for m in METRICS},
+            "d": r.d,
+            "delta_mAP": None if r.delta_map is None else _finite(r.delta_map),
+            "reference": None if r.reference is None else r.reference.name,
+            "seconds": round(r.seconds, 3),
+            "details": r.details,
+        })
+    return {
+        "directory": result.directory,
+        "shapes": result.shapes,
+        "classes": result.classes,
+        "options": options,
+        "describe": result.describe,
+        "rows": rows,
+        "seconds": round(result.seconds, 3),
+    }
+
+
+def write_json(result: EvaluationResult, path: str | Path) -> Path:
+    """Write atomically (temporary file, then rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    with os.fdopen(fd, "w") as fh:
+        json.dump(to_json(result), fh, indent=2)
+    os.replace(tmp, path)
+    return path
+
+
+def _finite(x: float) -> float | None:
+    return None if math.isnan(x) else round(float(x), 6)

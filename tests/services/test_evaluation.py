@@ -1,0 +1,149 @@
+"""The evaluation harness on a small SHREC'11 subset (3 classes x 4 meshes, copied into tmp_path)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.cli import CommandError
+from app.core.metrics import METRICS
+from app.core.vocabulary import Vocabulary
+from app.services import evaluation_cache
+from app.services.evaluation import EvaluationError, EvaluationOptions, evaluate
+from app.services.evaluation_report import format_table, to_json
+
+SHREC = Path(__file__).resolve().parents[3] / "shared" / "datasets" / "shrec11-simplified"
+CLASSES = ("alien", "ants", "armadillo")
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    if not SHREC.exists():
+        pytest.fail(f"dataset missing at {SHREC}: the tests read it from ../shared")
+    root = tmp_path_factory.mktemp("subset")
+    lines = ["file,class"]
+    for cls in CLASSES:
+        (root / cls).mkdir()
+        for src in sorted((SHREC / cls / "train").glob("*.obj"))[:4]:
+            shutil.copy(src, root / cls / src.name)
+            lines.append(f"{cls}/{src.name},{cls}")
+    (root / "labels.csv").write_text("\n".join(lines) + "\n")
+    return root
+
+
+def _options(cache: Path, **kw: object) -> EvaluationOptions:
+    # raw resolution (~250 vertices): a fast dense eigen-solve keeps the test short
+    base = dict(rows=("run5", "run1", "shape-dna", "d2"), vocabulary_size=8, target_vertices=0,
+                workers=2, cache_dir=cache, progress=False)
+    base.update(kw)
+    return EvaluationOptions(**base)  # type: ignore[arg-type]
+
+
+def _forbid_recompute(monkeypatch: pytest.MonkeyPatch) -> None:
+    def boom(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the cache should have answered")
+
+    monkeypatch.setattr(evaluation_cache, "describe", boom)
+    monkeypatch.setattr(evaluation_cache, "d2_histogram", boom)
+
+
+def test_table_rows_and_second_run_reads_the_cache(
+    folder: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    first = evaluate(folder, _options(tmp_path))
+    assert [r.name for r in first.rows] == ["run5", "run1", "shape-dna", "d2"]
+    assert (first.shapes, first.classes) == (12, 3)
+    assert first.describe["computed"] == 12 and first.describe["cached"] == 0
+    assert first.describe["d2_computed"] == 12
+    for row in first.rows:
+        assert set(row.scores) == set(METRICS)
+        assert all(0.0 <= v <= 1.0 for v in row.scores.values())
+        # 12 shapes, C = 4: at most 3 hits in the first min(32, 11) = 11 -> E <= 2*3/(3+11) = 3/7
+        assert row.scores["E"] <= 3 / 7 + 1e-12
+    assert [r.d for r in first.rows] == [4, 6, 30, 64]
+
+    # other BoF settings, in this process, with describe() and D2 forbidden: all from the cache
+    _forbid_recompute(monkeypatch)
+    second = evaluate(folder, _options(tmp_path, workers=1, mode="soft", keypoints_only=True))
+    assert second.describe["computed"] == 0 and second.describe["cached"] == 12
+    assert second.describe["d2_computed"] == 0
+    # baselines do not depend on the BoF settings: identical figures from the cached inputs
+    assert second.rows[2].scores == first.rows[2].scores
+    assert second.rows[3].scores == first.rows[3].scores
+    # same settings again: deterministic
+    third = evaluate(folder, _options(tmp_path, workers=1))
+    assert [r.scores for r in third.rows] == [r.scores for r in first.rows]
+
+    table = format_table(first)
+    assert table.splitlines()[0].split()[:8] == ["Row", "NN", "FT", "ST", "E", "DCG", "mAP(%)", "d"]
+    assert "12 computed" in table
+
+
+def test_variant_lines_noise_frozen_and_half_fit(folder: Path, tmp_path: Path) -> None:
+    frozen_dir = Vocabulary.fit_features(
+        np.random.default_rng(0).random((200, 4)), size=8, run="run5"
+    ).save(tmp_path / "frozen-v1")
+    result = evaluate(folder, _options(tmp_path / "cache", rows=("run5", "shape-dna"), noise=0.01,
+                                       vocabulary=frozen_dir, fit_on="half"))
+    names = [r.name for r in result.rows]
+    assert names == ["run5", "run5 [frozen frozen-v1]", "run5 [fit on 2/3 classes]", "run5 [noise 0.01]",
+                     "shape-dna", "shape-dna [noise 0.01]"]
+    main = result.rows[0]
+    for line in result.rows[1:4]:
+        assert line.reference is main
+        assert line.delta_map == pytest.approx(line.scores["mAP"] - main.scores["mAP"])
+    # clean and noisy descriptions are separate cache entries: 12 + 12 eigen-solves
+    assert result.describe["computed"] == 24
+    noisy_files = list((tmp_path / "cache").rglob("*.noise0.01-s0.npz"))
+    assert len(noisy_files) == 12
+    doc = to_json(result)
+    assert json.loads(json.dumps(doc))["rows"][3]["reference"] == "run5"
+
+
+def test_frozen_vocabulary_of_another_run_is_refused(folder: Path, tmp_path: Path) -> None:
+    vocab_dir = Vocabulary.fit_features(
+        np.random.default_rng(0).random((100, 6)), size=4, run="run1"
+    ).save(tmp_path / "v")
+    with pytest.raises(EvaluationError, match="encodes run1"):
+        evaluate(folder, _options(tmp_path, rows=("run5",), vocabulary=vocab_dir))
+
+
+def test_bad_folders_give_clear_errors(folder: Path, tmp_path: Path) -> None:
+    with pytest.raises(EvaluationError, match="labels.csv"):
+        evaluate(tmp_path, _options(tmp_path / "c"))
+    broken = tmp_path / "broken"
+    shutil.copytree(folder, broken)
+    (broken / "ants" / "bad.obj").write_text("v 0 0 0\nv 1 0 0\n")  # two points, no faces
+    with (broken / "labels.csv").open("a") as fh:
+        fh.write("ants/bad.obj,ants\n")
+    with pytest.raises(EvaluationError, match=r"1 mesh\(es\) could not be described: .*bad.obj"):
+        evaluate(broken, _options(tmp_path / "c", rows=("run5",)))
+    with pytest.raises(EvaluationError, match="unknown row"):
+        evaluate(folder, _options(tmp_path / "c", rows=("run9",)))
+
+
+def test_command_prints_the_table_and_writes_json(
+    folder: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from app.commands import evaluate as command
+
+    parser = argparse.ArgumentParser()
+    command.register(parser.add_subparsers())
+    out = tmp_path / "table.json"
+    args = parser.parse_args(["evaluate", str(folder), "--runs", "run5,d2", "--target-vertices", "0",
+                              "--vocabulary-size", "8", "--cache-dir", str(tmp_path / "c"),
+                              "--json", str(out), "--quiet", "--workers", "1"])
+    assert args.func(args) == 0
+    printed = capsys.readouterr().out
+    assert printed.splitlines()[2].startswith("run5 ")
+    doc = json.loads(out.read_text())
+    assert [r["name"] for r in doc["rows"]] == ["run5", "d2"]
+    assert doc["options"]["target_vertices"] == 0
+    bad = parser.parse_args(["evaluate", str(folder), "--runs", " , "])
+    with pytest.raises(CommandError, match="names no row"):
+        bad.func(bad)
