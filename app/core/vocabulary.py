@@ -146,7 +146,8 @@ class Vocabulary:
         directory = Path(directory)
         meta = json.loads((directory / "vocabulary.json").read_text())
         centers = np.load(directory / "centers.npy", allow_pickle=False).astype(np.float32)
-        if centers.ndim != 2 or centers.shape[0] != meta["size"] or centers.shape[1] != dimension(meta["run"]):
+        expected = (meta["size"], dimension(meta["run"]))
+        if centers.shape != expected:
             raise ValueError(f"vocabulary at {directory} is inconsistent: centers {centers.shape}")
         return cls(centers=centers, run=meta["run"], sigma=float(meta["sigma"]), metadata=meta)
 

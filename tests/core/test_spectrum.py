@@ -1,0 +1,69 @@
+"""Eigenpairs of L φ = λ M φ against the sphere's known spectrum, and the solver's contracts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from app.core.laplacian import cotangent_laplacian
+from app.core.spectrum import first_nonzero, smallest_eigenpairs
+
+
+def sphere_spectrum(radius: float, lmax: int) -> np.ndarray:
+    """Exact eigenvalues of the sphere: l(l+1)/r² with multiplicity 2l+1."""
+    return np.concatenate([[deg * (deg + 1) / radius**2] * (2 * deg + 1) for deg in range(lmax + 1)])
+
+
+@pytest.fixture(scope="module")
+def icosphere():
+    tm = trimesh.creation.icosphere(subdivisions=5, radius=2.0)
+    return cotangent_laplacian(np.asarray(tm.vertices), np.asarray(tm.faces))
+
+
+def test_icosphere_spectrum_matches_sphere_within_one_percent(icosphere):
+    L, M = icosphere
+    exact = sphere_spectrum(2.0, lmax=5)  # 36 eigenvalues, l <= 5
+    spec = smallest_eigenpairs(L, M, k=len(exact), method="sparse")
+    assert abs(spec.eigenvalues[0]) < 1e-8
+    rel = np.abs(spec.eigenvalues[1:] - exact[1:]) / exact[1:]
+    assert rel.max() < 0.01, rel
+    # multiplicities: the gap between consecutive l-groups dwarfs the spread inside a group
+    for deg in range(1, 6):
+        group = spec.eigenvalues[deg * deg : (deg + 1) ** 2]
+        assert np.ptp(group) < 0.02 * exact[deg * deg]
+
+
+@pytest.mark.parametrize("method", ["dense", "sparse"])
+def test_eigenvectors_are_mass_orthonormal(shrec_mesh, method):
+    L, M = cotangent_laplacian(shrec_mesh.vertices, shrec_mesh.faces)
+    spec = smallest_eigenpairs(L, M, k=40, method=method)
+    gram = spec.eigenvectors.T @ (M @ spec.eigenvectors)
+    assert np.allclose(gram, np.eye(40), atol=1e-6)
+    residual = L @ spec.eigenvectors - (M @ spec.eigenvectors) * spec.eigenvalues
+    assert np.abs(residual).max() < 1e-6 * spec.eigenvalues.max()
+
+
+def test_dense_and_sparse_agree(shrec_mesh):
+    L, M = cotangent_laplacian(shrec_mesh.vertices, shrec_mesh.faces)
+    a = smallest_eigenpairs(L, M, k=30, method="dense").eigenvalues
+    b = smallest_eigenpairs(L, M, k=30, method="sparse").eigenvalues
+    assert np.allclose(a, b, rtol=1e-6, atol=1e-9)
+
+
+def test_k_is_capped_below_n():
+    tm = trimesh.creation.icosahedron()  # 12 vertices
+    L, M = cotangent_laplacian(np.asarray(tm.vertices), np.asarray(tm.faces))
+    spec = smallest_eigenpairs(L, M, k=300)
+    assert spec.eigenvalues.shape == (11,) and spec.eigenvectors.shape == (12, 11)
+
+
+def test_two_components_give_two_zero_eigenvalues():
+    a = trimesh.creation.icosphere(subdivisions=2)
+    b = a.copy()
+    b.apply_translation([5.0, 0, 0])
+    both = trimesh.util.concatenate([a, b])
+    L, M = cotangent_laplacian(np.asarray(both.vertices), np.asarray(both.faces))
+    spec = smallest_eigenpairs(L, M, k=10)
+    assert np.all(spec.eigenvalues[:2] < 1e-8)
+    assert first_nonzero(spec.eigenvalues) == 2

@@ -1,0 +1,95 @@
+"""Vector quantisation (eqs. 5-6), the BoF integral (eqs. 7-8), L1 distance, and persistence."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from app.core.pipeline import ShapeDescription
+from app.core.vocabulary import EncodeParams, Vocabulary, l1_distance
+
+
+def make_description(h: np.ndarray, keypoints=None, weights=None) -> ShapeDescription:
+    n = h.shape[0]
+    return ShapeDescription(
+        hks=h.astype(np.float32),
+        weights=np.full(n, 1.0 / n, np.float32) if weights is None else weights.astype(np.float32),
+        keypoints=np.ones(n, bool) if keypoints is None else keypoints,
+        eigenvalues=np.arange(5.0),
+        input_vertices=n,
+    )
+
+
+def h_with_run5(p: np.ndarray) -> np.ndarray:
+    """(n, 4) -> (n, 100) normalised-HKS stand-in whose Run 5 selection is exactly p."""
+    h = np.zeros((p.shape[0], 100))
+    h[:, [19, 39, 59, 79]] = p
+    return h
+
+
+WORDS = np.array([[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0]], np.float32)
+
+
+def test_hard_vq_assigns_the_nearest_word_and_counts():
+    vocab = Vocabulary(WORDS, run="run5", sigma=0.5)
+    p = np.array([[0.1, 0, 0, 0], [0.9, 0.2, 0, 0], [0.2, 0.7, 0, 0], [0.8, 0, 0, 0]])
+    bof = vocab.encode(make_description(h_with_run5(p)), EncodeParams(normalize=False))
+    assert bof.tolist() == [1.0, 2.0, 1.0]  # eq. 8: Σ θ(x)
+    assert np.allclose(vocab.encode(make_description(h_with_run5(p))), [0.25, 0.5, 0.25])
+
+
+def test_soft_vq_rows_sum_to_one_and_tend_to_hard_as_sigma_shrinks():
+    vocab = Vocabulary(WORDS, run="run5", sigma=1.0)
+    p = np.array([[0.3, 0.1, 0, 0], [0.0, 0.8, 0.1, 0]])
+    soft = vocab.quantize(p, EncodeParams(mode="soft"))
+    assert np.allclose(soft.sum(axis=1), 1.0)
+    # eq. 5 by hand for the first point: θ_i ∝ exp(-|p - p_i|² / 2σ²)
+    d2 = ((p[0] - WORDS) ** 2).sum(axis=1)
+    expected = np.exp(-d2 / 2.0) / np.exp(-d2 / 2.0).sum()
+    assert np.allclose(soft[0], expected)
+    sharp = vocab.quantize(p, EncodeParams(mode="soft", sigma_scale=1e-3))
+    assert np.allclose(sharp, vocab.quantize(p, EncodeParams(mode="hard")), atol=1e-6)
+
+
+def test_keypoints_only_and_area_weighting():
+    vocab = Vocabulary(WORDS, run="run5", sigma=0.5)
+    p = np.array([[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0]], float)
+    d = make_description(h_with_run5(p), keypoints=np.array([True, True, False]),
+                         weights=np.array([0.5, 0.25, 0.25]))
+    assert np.allclose(vocab.encode(d, EncodeParams(keypoints_only=True)), [0.5, 0.5, 0.0])
+    assert np.allclose(vocab.encode(d, EncodeParams(area_weighted=True)), [0.5, 0.25, 0.25])
+
+
+def test_l1_distance_by_hand():
+    a = np.array([[0.5, 0.5, 0.0]])
+    b = np.array([[0.0, 0.5, 0.5], [0.5, 0.5, 0.0]])
+    assert np.allclose(l1_distance(a, b), [[1.0, 0.0]])
+
+
+def test_fit_finds_well_separated_clusters():
+    rng = np.random.default_rng(0)
+    centres = rng.random((8, 4)) * 10
+    feats = np.concatenate([c + 0.01 * rng.normal(size=(50, 4)) for c in centres])
+    vocab = Vocabulary.fit_features(feats, size=8, run="run5")
+    matched = np.abs(vocab.centers[:, None, :] - centres[None]).sum(axis=2).min(axis=0)
+    assert matched.max() < 0.05
+    assert vocab.metadata["trained_on_descriptors"] == 400
+    with pytest.raises(ValueError, match="distinct descriptors"):
+        Vocabulary.fit_features(feats[:5], size=8, run="run5")
+
+
+def test_save_load_round_trip_without_pickle(tmp_path):
+    vocab = Vocabulary.fit_features(np.random.default_rng(1).random((300, 4)), size=16, run="run5")
+    path = vocab.save(tmp_path / "v1")
+    again = Vocabulary.load(path)
+    assert np.array_equal(again.centers, vocab.centers) and again.run == "run5"
+    assert again.sigma == pytest.approx(vocab.sigma)
+    assert json.loads((path / "vocabulary.json").read_text())["size"] == 16
+    with pytest.raises(FileExistsError):
+        vocab.save(tmp_path / "v1")
+    # a file with pickled objects is refused by the loader
+    np.save(path / "centers.npy", np.array([object()], dtype=object), allow_pickle=True)
+    with pytest.raises(ValueError):
+        Vocabulary.load(path)
