@@ -38,8 +38,14 @@ def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def _options(cache: Path, **kw: object) -> EvaluationOptions:
     # raw resolution (~250 vertices): a fast dense eigen-solve keeps the test short
-    base = dict(rows=("run5", "run1", "shape-dna", "d2"), vocabulary_size=8, target_vertices=0,
-                workers=2, cache_dir=cache, progress=False)
+    base = dict(
+        rows=("run5", "run1", "shape-dna", "d2"),
+        vocabulary_size=8,
+        target_vertices=0,
+        workers=2,
+        cache_dir=cache,
+        progress=False,
+    )
     base.update(kw)
     return EvaluationOptions(**base)  # type: ignore[arg-type]
 
@@ -85,14 +91,24 @@ def test_table_rows_and_second_run_reads_the_cache(
 
 
 def test_variant_lines_noise_frozen_and_half_fit(folder: Path, tmp_path: Path) -> None:
-    frozen_dir = Vocabulary.fit_features(
-        np.random.default_rng(0).random((200, 4)), size=8, run="run5"
-    ).save(tmp_path / "frozen-v1")
-    result = evaluate(folder, _options(tmp_path / "cache", rows=("run5", "shape-dna"), noise=0.01,
-                                       vocabulary=frozen_dir, fit_on="half"))
+    frozen_dir = Vocabulary.fit_features(np.random.default_rng(0).random((200, 4)), size=8, run="run5").save(
+        tmp_path / "frozen-v1"
+    )
+    result = evaluate(
+        folder,
+        _options(
+            tmp_path / "cache", rows=("run5", "shape-dna"), noise=0.01, vocabulary=frozen_dir, fit_on="half"
+        ),
+    )
     names = [r.name for r in result.rows]
-    assert names == ["run5", "run5 [frozen frozen-v1]", "run5 [fit on 2/3 classes]", "run5 [noise 0.01]",
-                     "shape-dna", "shape-dna [noise 0.01]"]
+    assert names == [
+        "run5",
+        "run5 [frozen frozen-v1]",
+        "run5 [fit on 2/3 classes]",
+        "run5 [noise 0.01]",
+        "shape-dna",
+        "shape-dna [noise 0.01]",
+    ]
     main = result.rows[0]
     for line in result.rows[1:4]:
         assert line.reference is main
@@ -106,9 +122,9 @@ def test_variant_lines_noise_frozen_and_half_fit(folder: Path, tmp_path: Path) -
 
 
 def test_frozen_vocabulary_of_another_run_is_refused(folder: Path, tmp_path: Path) -> None:
-    vocab_dir = Vocabulary.fit_features(
-        np.random.default_rng(0).random((100, 6)), size=4, run="run1"
-    ).save(tmp_path / "v")
+    vocab_dir = Vocabulary.fit_features(np.random.default_rng(0).random((100, 6)), size=4, run="run1").save(
+        tmp_path / "v"
+    )
     with pytest.raises(EvaluationError, match="encodes run1"):
         evaluate(folder, _options(tmp_path, rows=("run5",), vocabulary=vocab_dir))
 
@@ -135,9 +151,25 @@ def test_command_prints_the_table_and_writes_json(
     parser = argparse.ArgumentParser()
     command.register(parser.add_subparsers())
     out = tmp_path / "table.json"
-    args = parser.parse_args(["evaluate", str(folder), "--runs", "run5,d2", "--target-vertices", "0",
-                              "--vocabulary-size", "8", "--cache-dir", str(tmp_path / "c"),
-                              "--json", str(out), "--quiet", "--workers", "1"])
+    args = parser.parse_args(
+        [
+            "evaluate",
+            str(folder),
+            "--runs",
+            "run5,d2",
+            "--target-vertices",
+            "0",
+            "--vocabulary-size",
+            "8",
+            "--cache-dir",
+            str(tmp_path / "c"),
+            "--json",
+            str(out),
+            "--quiet",
+            "--workers",
+            "1",
+        ]
+    )
     assert args.func(args) == 0
     printed = capsys.readouterr().out
     assert printed.splitlines()[2].startswith("run5 ")
@@ -147,3 +179,19 @@ def test_command_prints_the_table_and_writes_json(
     bad = parser.parse_args(["evaluate", str(folder), "--runs", " , "])
     with pytest.raises(CommandError, match="names no row"):
         bad.func(bad)
+
+
+def test_cache_keys_separate_parameters_variants_and_code(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from app.core.keypoints import KeypointFilter
+    from app.core.pipeline import DescribeParams
+
+    cache = evaluation_cache.DescriptionCache(tmp_path)
+    clean, noisy = evaluation_cache.Variant(), evaluation_cache.Variant(0.01, 0)
+    p1, p2 = DescribeParams(), DescribeParams(keypoint_filter=KeypointFilter(enabled=False))
+    paths = {cache.description_path("ab", p, v) for p in (p1, p2) for v in (clean, noisy)}
+    assert len(paths) == 4
+    # an edit to the core code that computes descriptions must not reuse old entries
+    monkeypatch.setattr(evaluation_cache, "_DESCRIBE_CODE", ("mesh", "pipeline"))
+    assert evaluation_cache.DescriptionCache(tmp_path).description_path("ab", p1, clean) not in paths

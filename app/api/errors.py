@@ -1,0 +1,65 @@
+"""Domain errors -> HTTP, in one place. Every error body is {"error": {"code", "message"}}."""
+
+from __future__ import annotations
+
+import logging
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from app.core.mesh import InvalidMeshError
+from app.services import errors as e
+
+log = logging.getLogger(__name__)
+
+STATUS: dict[type[e.ServiceError], int] = {
+    e.NotFoundError: 404,
+    e.InvalidInputError: 422,
+    e.PayloadTooLargeError: 413,
+    e.QueueFullError: 503,
+    e.NotReadyError: 503,
+    e.ConflictError: 409,
+    e.DescribeTimeoutError: 504,
+}
+HTTP_CODES = {401: "unauthorized", 404: "not_found", 405: "method_not_allowed", 413: "payload_too_large"}
+
+
+class AdminAuthError(e.ServiceError):
+    code = "unauthorized"
+
+
+STATUS[AdminAuthError] = 401
+
+
+def error_response(status: int, code: str, message: str, headers: dict | None = None) -> JSONResponse:
+    return JSONResponse({"error": {"code": code, "message": message}}, status_code=status, headers=headers)
+
+
+def install(app: FastAPI) -> None:
+    @app.exception_handler(e.ServiceError)
+    async def _service(request: Request, exc: e.ServiceError) -> JSONResponse:
+        status = next((s for cls, s in STATUS.items() if isinstance(exc, cls)), 500)
+        headers = {"WWW-Authenticate": "X-Admin-Token"} if status == 401 else None
+        return error_response(status, exc.code, exc.message, headers)
+
+    @app.exception_handler(InvalidMeshError)
+    async def _mesh(request: Request, exc: InvalidMeshError) -> JSONResponse:
+        return error_response(422, "invalid_mesh", str(exc))
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:
+        first = exc.errors()[0] if exc.errors() else {}
+        where = ".".join(str(p) for p in first.get("loc", ()))
+        return error_response(422, "invalid_request", f"{where}: {first.get('msg', 'invalid request')}")
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        code = HTTP_CODES.get(exc.status_code, "http_error")
+        return error_response(exc.status_code, code, str(exc.detail))
+
+    @app.exception_handler(Exception)
+    async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
+        log.exception("unhandled error on %s %s", request.method, request.url.path)
+        return error_response(500, "internal_error", "internal error; see the server log")

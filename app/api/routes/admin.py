@@ -1,0 +1,71 @@
+"""/admin: vocabulary and index maintenance (X-Admin-Token required)."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Body, status
+
+from app.api.deps import AdminDep, CtxDep, RuntimeDep
+from app.api.schemas import ErrorResponse, JobAccepted, VocabularyPublic, VocabularyRebuild
+from app.core.descriptor import RUNS
+from app.services.errors import InvalidInputError
+from app.storage import jobs as jobs_repo
+from app.storage import vocabularies as vocab_repo
+
+router = APIRouter(prefix="/admin", tags=["admin"], responses={401: {"model": ErrorResponse}})
+
+
+def _enqueue(ctx, kind: str, payload: dict) -> JobAccepted:
+    with ctx.db.write() as conn:
+        running = jobs_repo.pending(conn, kind)
+        if running is not None:  # one at a time: answer with the job already under way
+            return JobAccepted(job_id=running.id, state=running.state)
+        job_id = jobs_repo.enqueue(conn, kind, payload=payload)
+    return JobAccepted(job_id=job_id, state="queued")
+
+
+@router.post("/vocabulary/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted)
+def rebuild_vocabulary(
+    _: AdminDep, ctx: CtxDep, body: Annotated[VocabularyRebuild | None, Body()] = None
+) -> JobAccepted:
+    """Fit a new vocabulary on the stored descriptions, re-encode, re-index, swap (a job)."""
+    body = body or VocabularyRebuild(size=ctx.settings.vocabulary_size, run=ctx.settings.vocabulary_run)
+    if body.run not in RUNS:
+        raise InvalidInputError(f"run must be one of {', '.join(RUNS)}")
+    return _enqueue(ctx, "rebuild_vocabulary", body.model_dump())
+
+
+@router.post("/index/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted)
+def rebuild_index(_: AdminDep, ctx: CtxDep) -> JobAccepted:
+    """Re-encode every model with the active vocabulary from its cached description (a job)."""
+    return _enqueue(ctx, "rebuild_index", {})
+
+
+@router.get("/vocabulary", response_model=VocabularyPublic)
+def get_vocabulary(_: AdminDep, runtime: RuntimeDep) -> VocabularyPublic:
+    with runtime.ctx.db.read() as conn:
+        active = vocab_repo.active(conn)
+        versions = len(vocab_repo.all_versions(conn))
+    live = runtime.live.status()
+    if active is None:
+        return VocabularyPublic(
+            id=None,
+            words=None,
+            run=None,
+            trained_on_descriptors=None,
+            created_at=None,
+            indexed_models=0,
+            versions=versions,
+            metadata={},
+        )
+    return VocabularyPublic(
+        id=active.id,
+        words=active.size,
+        run=active.run,
+        trained_on_descriptors=active.trained_on,
+        created_at=active.created_at,
+        indexed_models=live["indexed"] if live["vocabulary_id"] == active.id else 0,
+        versions=versions,
+        metadata=active.metadata,
+    )

@@ -1,0 +1,148 @@
+"""/models: upload, browse, fetch, delete, similar, thumbnail."""
+
+from __future__ import annotations
+
+import mimetypes
+from typing import Annotated
+
+from fastapi import APIRouter, Query, Request, Response, status
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import FileResponse, JSONResponse
+
+from app.api.deps import CtxDep, RuntimeDep
+from app.api.schemas import ErrorResponse, ModelAccepted, ModelPublic, ModelsPublic, SearchHit, SearchResponse
+from app.api.uploads import read_form
+from app.core.mesh import load_mesh
+from app.services import catalog, ingestion, search
+from app.services.errors import InvalidInputError
+from app.services.thumbnails import render_png
+from app.storage.blobs import atomic_write
+
+router = APIRouter(prefix="/models", tags=["models"])
+ERRORS: dict[int | str, dict] = {c: {"model": ErrorResponse} for c in (404, 413, 422, 503)}
+
+UPLOAD_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "multipart/form-data": {
+                "schema": {
+                    "type": "object",
+                    "required": ["file"],
+                    "properties": {
+                        "file": {"type": "string", "format": "binary", "description": "OBJ/OFF/PLY/STL/GLB"},
+                        "name": {"type": "string"},
+                        "label": {"type": "string"},
+                        "metadata": {"type": "string", "description": "a JSON object"},
+                    },
+                }
+            }
+        },
+    }
+}
+
+
+@router.post(
+    "",
+    status_code=status.HTTP_202_ACCEPTED,
+    response_model=ModelAccepted,
+    responses=ERRORS,
+    openapi_extra=UPLOAD_BODY,
+)
+async def upload_model(request: Request, runtime: RuntimeDep) -> JSONResponse:
+    """Store a mesh and queue its ingestion (202); identical content answers 200 with the existing model."""
+    ctx = runtime.ctx
+    form = await read_form(request, ctx.settings.max_upload_bytes)
+    filename, data = form.file("file")
+    metadata = ingestion.parse_metadata(form.fields.get("metadata"))
+    result = await run_in_threadpool(
+        ingestion.submit,
+        ctx,
+        data,
+        filename,
+        form.fields.get("name") or None,
+        form.fields.get("label") or None,
+        metadata,
+    )
+    body = ModelAccepted(
+        model_id=result.model.id,
+        job_id=result.job_id,
+        status=result.model.status,
+        model=ModelPublic.of(result.model),
+    )
+    code = status.HTTP_202_ACCEPTED if result.created else status.HTTP_200_OK
+    return JSONResponse(body.model_dump(), status_code=code)
+
+
+@router.get("", response_model=ModelsPublic)
+def list_models(
+    ctx: CtxDep,
+    label: str | None = None,
+    status: str | None = Query(None, description="queued | ready | failed"),
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Query(ge=0)] = 0,
+) -> ModelsPublic:
+    rows, total = catalog.list_models(ctx, label, status, limit, offset)
+    return ModelsPublic(data=[ModelPublic.of(m) for m in rows], count=total)
+
+
+@router.get("/{model_id}", response_model=ModelPublic, responses=ERRORS)
+def get_model(model_id: int, ctx: CtxDep) -> ModelPublic:
+    return ModelPublic.of(ingestion.get_model(ctx, model_id))
+
+
+@router.get("/{model_id}/mesh", responses=ERRORS, response_class=FileResponse)
+def get_mesh(model_id: int, ctx: CtxDep) -> FileResponse:
+    model = ingestion.get_model(ctx, model_id)
+    path = ctx.blobs.mesh_path(model.sha256, model.file_type)
+    media = mimetypes.guess_type(f"x.{model.file_type}")[0] or "application/octet-stream"
+    return FileResponse(path, media_type=media, filename=f"{model.name}.{model.file_type}")
+
+
+@router.delete("/{model_id}", status_code=status.HTTP_204_NO_CONTENT, responses=ERRORS)
+def delete_model(model_id: int, runtime: RuntimeDep) -> Response:
+    """Gone from the index, the database and the blob store."""
+    catalog.delete_model(runtime.ctx, runtime.live, model_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+@router.get("/{model_id}/similar", response_model=SearchResponse, responses=ERRORS)
+def similar(
+    model_id: int,
+    runtime: RuntimeDep,
+    k: Annotated[int, Query(ge=1, le=search.MAX_K)] = 10,
+    label: str | None = None,
+) -> SearchResponse:
+    result = search.similar(runtime.ctx, runtime.live, model_id, k, label)
+    return to_response(result)
+
+
+@router.get("/{model_id}/thumbnail.png", responses=ERRORS, response_class=Response)
+def thumbnail(model_id: int, ctx: CtxDep, size: Annotated[int, Query(ge=32, le=1024)] = 256) -> Response:
+    """A server-side rendering of the stored mesh (cached under the data directory)."""
+    model = ingestion.get_model(ctx, model_id)
+    path = ctx.blobs.thumbnail_path(model.id, size)
+    if not path.is_file():
+        mesh_path = ctx.blobs.mesh_path(model.sha256, model.file_type)
+        try:
+            mesh = load_mesh(mesh_path, model.file_type, max_vertices=ctx.settings.max_vertices)
+        except ValueError as exc:
+            raise InvalidInputError(f"model {model_id} has no renderable mesh: {exc}") from exc
+        atomic_write(path, render_png(mesh.vertices, mesh.faces, size))
+    return Response(
+        path.read_bytes(),
+        media_type="image/png",
+        headers={"Cache-Control": "public, max-age=86400, immutable"},
+    )
+
+
+def to_response(result: search.SearchResult) -> SearchResponse:
+    hits = [
+        SearchHit(
+            model_id=h.model.id, name=h.model.name, label=h.model.label, distance=h.distance, rank=h.rank
+        )
+        for h in result.hits
+    ]
+    return SearchResponse(
+        data=hits, count=len(hits), vocabulary_id=result.vocabulary_id, seconds=result.seconds
+    )

@@ -1,0 +1,67 @@
+"""POST /search: describe the query mesh in the process pool, encode, rank by L1 distance."""
+
+from __future__ import annotations
+
+import time
+
+from fastapi import APIRouter, Request
+from fastapi.concurrency import run_in_threadpool
+
+from app.api.deps import RuntimeDep
+from app.api.routes.models import ERRORS, to_response
+from app.api.schemas import SearchResponse
+from app.api.uploads import read_form
+from app.core.mesh import detect_format
+from app.services import search
+from app.services.errors import InvalidInputError
+
+router = APIRouter(tags=["search"])
+
+SEARCH_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "multipart/form-data": {
+                "schema": {
+                    "type": "object",
+                    "required": ["file"],
+                    "properties": {
+                        "file": {"type": "string", "format": "binary", "description": "the query mesh"},
+                        "k": {"type": "integer", "default": 10, "minimum": 1, "maximum": search.MAX_K},
+                        "label": {"type": "string", "description": "only return models with this label"},
+                    },
+                }
+            }
+        },
+    }
+}
+
+
+@router.post(
+    "/search",
+    response_model=SearchResponse,
+    responses={**ERRORS, 504: ERRORS[422]},
+    openapi_extra=SEARCH_BODY,
+)
+async def search_mesh(request: Request, runtime: RuntimeDep) -> SearchResponse:
+    t = time.perf_counter()
+    form = await read_form(request, runtime.ctx.settings.max_upload_bytes)
+    filename, data = form.file("file")
+    try:
+        k = search.check_k(int(form.fields.get("k") or 10))
+    except ValueError as exc:
+        raise InvalidInputError(f"k must be an integer between 1 and {search.MAX_K}") from exc
+    runtime.live.require()  # fail fast, before the expensive part, when nothing can answer
+    seconds = {"upload": time.perf_counter() - t}
+    t = time.perf_counter()
+    description, stages = await runtime.describer.describe(data, detect_format(filename))
+    describe_wall = time.perf_counter() - t
+    runtime.metrics.describe_seconds.labels("query").observe(describe_wall)
+    seconds.update({f"describe.{name}": v for name, v in stages.items()})
+    seconds["describe"] = describe_wall
+    result = await run_in_threadpool(
+        search.search_description, runtime.ctx, runtime.live, description, k, form.fields.get("label") or None
+    )
+    seconds.update(result.seconds)
+    seconds["total"] = sum(v for name, v in seconds.items() if "." not in name)
+    return to_response(search.SearchResult(result.hits, result.vocabulary_id, seconds))

@@ -1,0 +1,96 @@
+"""Streaming multipart reader: refuses an upload (413) as soon as it passes the size limit.
+
+FastAPI's UploadFile spools the whole body before the handler runs; this reads the request stream
+chunk by chunk, so an oversized upload costs at most `max_bytes` of memory and reading.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from fastapi import Request
+from python_multipart.exceptions import MultipartParseError
+from python_multipart.multipart import MultipartParser, parse_options_header
+
+from app.services.errors import InvalidInputError, PayloadTooLargeError
+
+MAX_FIELD_BYTES = 64 * 1024  # text fields (name, label, metadata)
+
+
+@dataclass
+class UploadForm:
+    fields: dict[str, str] = field(default_factory=dict)
+    files: dict[str, tuple[str, bytes]] = field(default_factory=dict)  # name -> (filename, content)
+
+    def file(self, name: str = "file") -> tuple[str, bytes]:
+        if name not in self.files:
+            raise InvalidInputError(f"the multipart form has no file field {name!r}")
+        return self.files[name]
+
+
+async def read_form(request: Request, max_bytes: int) -> UploadForm:
+    ctype, params = parse_options_header(request.headers.get("content-type", ""))
+    if ctype != b"multipart/form-data" or b"boundary" not in params:
+        raise InvalidInputError("send the mesh as multipart/form-data with a 'file' field")
+    declared = request.headers.get("content-length")
+    if declared and declared.isdigit() and int(declared) > max_bytes + MAX_FIELD_BYTES:
+        raise _too_large(max_bytes)
+    form = UploadForm()
+    state: dict = {"headers": {}, "field": b"", "value": b""}
+    parts: list[bytearray] = []
+    total = 0
+
+    def on_part_begin() -> None:
+        state["headers"] = {}
+        parts.clear()
+
+    def on_header_field(data: bytes, start: int, end: int) -> None:
+        state["field"] += data[start:end]
+
+    def on_header_value(data: bytes, start: int, end: int) -> None:
+        state["value"] += data[start:end]
+
+    def on_header_end() -> None:
+        state["headers"][state["field"].lower()] = state["value"]
+        state["field"], state["value"] = b"", b""
+
+    def on_part_data(data: bytes, start: int, end: int) -> None:
+        parts.append(bytearray(data[start:end]))
+
+    def on_part_end() -> None:
+        _, disp = parse_options_header(state["headers"].get(b"content-disposition", b""))
+        name = disp.get(b"name", b"").decode("utf-8", "replace")
+        content = b"".join(parts)
+        if b"filename" in disp:
+            form.files[name] = (disp[b"filename"].decode("utf-8", "replace"), content)
+        else:
+            if len(content) > MAX_FIELD_BYTES:
+                raise InvalidInputError(f"form field {name!r} is longer than {MAX_FIELD_BYTES} bytes")
+            form.fields[name] = content.decode("utf-8", "replace")
+
+    callbacks = {
+        "on_part_begin": on_part_begin,
+        "on_header_field": on_header_field,
+        "on_header_value": on_header_value,
+        "on_header_end": on_header_end,
+        "on_part_data": on_part_data,
+        "on_part_end": on_part_end,
+    }
+    parser = MultipartParser(params[b"boundary"], callbacks)  # type: ignore[arg-type]
+    async for chunk in request.stream():
+        total += len(chunk)
+        if total > max_bytes + MAX_FIELD_BYTES:
+            raise _too_large(max_bytes)
+        try:
+            parser.write(chunk)
+        except MultipartParseError as exc:
+            raise InvalidInputError(f"malformed multipart body: {exc}") from exc
+    parser.finalize()
+    for _, content in form.files.values():
+        if len(content) > max_bytes:
+            raise _too_large(max_bytes)
+    return form
+
+
+def _too_large(max_bytes: int) -> PayloadTooLargeError:
+    return PayloadTooLargeError(f"the upload is larger than the limit of {max_bytes / 1e6:g} MB")

@@ -1,0 +1,81 @@
+"""One settings object, read from SHAPEBAG_* environment variables; built in create_app(), never at import."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from pydantic import BaseModel, Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from app.core.pipeline import DescribeParams
+from app.core.vocabulary import EncodeParams
+
+DEFAULT_ADMIN_TOKEN = "change-me"
+REPO_ROOT = Path(__file__).resolve().parent.parent
+SHIPPED_VOCABULARY = REPO_ROOT / "data" / "vocabulary" / "default"
+
+
+class DescribeSettings(BaseModel):
+    """Per-shape computation (SHAPEBAG_DESCRIBE__K=300 ...)."""
+
+    k: int = Field(300, ge=2)
+    m: int = Field(100, ge=4)
+    target_vertices: int = Field(1000, ge=0)
+    solver: str = "auto"
+
+    def params(self) -> DescribeParams:
+        return DescribeParams(k=self.k, m=self.m, target_vertices=self.target_vertices, solver=self.solver)
+
+
+class EncodeSettings(BaseModel):
+    """How a description becomes a BoF vector (SHAPEBAG_ENCODE__MODE=soft ...)."""
+
+    mode: str = "hard"
+    sigma_scale: float = 1.0
+    keypoints_only: bool = False
+    area_weighted: bool = False
+
+    def params(self) -> EncodeParams:
+        return EncodeParams(
+            mode=self.mode,
+            sigma_scale=self.sigma_scale,
+            keypoints_only=self.keypoints_only,
+            area_weighted=self.area_weighted,
+            normalize=True,
+        )
+
+
+class Settings(BaseSettings):
+    model_config = SettingsConfigDict(env_prefix="SHAPEBAG_", env_nested_delimiter="__", extra="ignore")
+
+    data_dir: Path = Path("var/data")
+    host: str = "127.0.0.1"
+    port: int = 8000
+    workers: int = Field(default_factory=lambda: os.cpu_count() or 1, ge=0)  # embedded ingestion processes
+    search_processes: int = Field(1, ge=1)  # pool describing query meshes
+    admin_token: str = DEFAULT_ADMIN_TOKEN
+    dev_mode: bool = False
+    cors_origins: list[str] = []  # closed by default
+    max_upload_bytes: int = 50 * 1024 * 1024
+    max_vertices: int = 2_000_000
+    describe_timeout_s: float = 60.0
+    queue_limit: int = 10_000  # queued ingest jobs beyond which uploads get 503
+    lease_seconds: float = 120.0
+    max_attempts: int = 3
+    poll_interval_s: float = 0.5  # how often the API process looks for newly ready models
+    index_save_interval_s: float = 30.0
+    index_backend: str = "faiss"  # faiss | numpy
+    vocabulary_size: int = 64
+    vocabulary_run: str = "run5"
+    auto_vocabulary_min_models: int = 16  # with no vocabulary, fit one once this many models are ready
+    default_vocabulary: Path | None = SHIPPED_VOCABULARY
+    describe: DescribeSettings = DescribeSettings()
+    encode: EncodeSettings = EncodeSettings()
+
+    def check_secure(self) -> None:
+        """Refuse to start with the default admin token outside dev mode."""
+        if not self.dev_mode and (not self.admin_token or self.admin_token == DEFAULT_ADMIN_TOKEN):
+            raise ValueError(
+                "SHAPEBAG_ADMIN_TOKEN is unset or the default: set a secret token, or SHAPEBAG_DEV_MODE=1"
+            )

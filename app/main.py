@@ -1,0 +1,118 @@
+"""create_app(settings) and its lifespan: open storage, load vocabulary + index, start workers and pools."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI, Request
+from fastapi.middleware.cors import CORSMiddleware
+
+from app.api import errors
+from app.api.deps import Runtime
+from app.api.routes import admin, health, jobs, models, search
+from app.config import Settings
+from app.services import vocabularies
+from app.services.context import ServiceContext, open_context
+from app.services.live_index import LiveIndex
+from app.services.metrics import Metrics
+from app.services.query_pool import QueryDescriber
+from app.storage import jobs as jobs_repo
+from app.storage import models as models_repo
+from app.storage import vocabularies as vocab_repo
+from app.worker.processes import WorkerPool
+
+log = logging.getLogger("shapebag")
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    settings = settings or Settings()
+    settings.check_secure()
+    metrics = Metrics()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        ctx = await asyncio.to_thread(open_context, settings)
+        await asyncio.to_thread(vocabularies.ensure_default, ctx)
+        live = LiveIndex(ctx)
+        await asyncio.to_thread(live.refresh)
+        workers = WorkerPool(ctx.settings, ctx.settings.workers)
+        workers.start()
+        describer = QueryDescriber(
+            settings.search_processes,
+            settings.describe.params(),
+            settings.max_vertices,
+            settings.describe_timeout_s,
+        )
+        app.state.runtime = Runtime(ctx, live, describer, workers, metrics)
+        poller = asyncio.create_task(_follow(ctx, live))
+        log.info("serving data dir %s: %s", ctx.data_dir, live.status())
+        try:
+            yield
+        finally:
+            poller.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await poller
+            await asyncio.to_thread(workers.stop)
+            await asyncio.to_thread(describer.close)
+            await asyncio.to_thread(live.save)
+
+    app = FastAPI(
+        title="shapebag",
+        version="0.1.0",
+        description="Non-rigid 3D shape retrieval: Heat Kernel Signature + Bag of Features, L1 index.",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    errors.install(app)
+    if settings.cors_origins:  # closed unless configured
+        app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "POST"])
+
+    @app.middleware("http")
+    async def observe_latency(request: Request, call_next):  # type: ignore[no-untyped-def]
+        t = time.perf_counter()
+        response = await call_next(request)
+        route = request.scope.get("route")
+        path = getattr(route, "path", "unmatched")
+        metrics.request_seconds.labels(request.method, path, str(response.status_code)).observe(
+            time.perf_counter() - t
+        )
+        return response
+
+    for module in (models, jobs, search, admin, health):
+        app.include_router(module.router)
+    return app
+
+
+async def _follow(ctx: ServiceContext, live: LiveIndex) -> None:
+    """Poll the database: new vectors/versions into the live index, periodic saves, first vocabulary."""
+    s = ctx.settings
+    while True:
+        try:
+            await asyncio.to_thread(live.refresh)
+            if time.monotonic() - live.last_saved > s.index_save_interval_s:
+                await asyncio.to_thread(live.save)
+            if live.pair is None:
+                await asyncio.to_thread(_maybe_fit_first_vocabulary, ctx)
+        except asyncio.CancelledError:
+            raise
+        except Exception:  # keep following; the next round retries
+            log.exception("index follower failed")
+        await asyncio.sleep(s.poll_interval_s)
+
+
+def _maybe_fit_first_vocabulary(ctx: ServiceContext) -> None:
+    """No vocabulary at all (none shipped): queue one fit once enough models are ready."""
+    with ctx.db.read() as conn:
+        if vocab_repo.all_versions(conn) or jobs_repo.pending(conn, "rebuild_vocabulary"):
+            return
+        ready = models_repo.count_by_status(conn)["ready"]
+    if ready >= ctx.settings.auto_vocabulary_min_models:
+        with ctx.db.write() as conn:
+            if jobs_repo.pending(conn, "rebuild_vocabulary") is None:
+                jobs_repo.enqueue(conn, "rebuild_vocabulary", payload={})
+                log.info("%d models ready and no vocabulary: queued a vocabulary fit", ready)

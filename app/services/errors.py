@@ -1,0 +1,41 @@
+"""Domain errors raised by services; app/api/errors.py maps each to one HTTP status and code, once."""
+
+from __future__ import annotations
+
+
+class ServiceError(Exception):
+    code = "error"
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.message = message
+
+
+class NotFoundError(ServiceError):
+    code = "not_found"
+
+
+class InvalidInputError(ServiceError):
+    code = "invalid_input"
+
+
+class PayloadTooLargeError(ServiceError):
+    code = "payload_too_large"
+
+
+class QueueFullError(ServiceError):
+    code = "queue_full"
+
+
+class NotReadyError(ServiceError):
+    """The service cannot answer yet (no vocabulary or index)."""
+
+    code = "not_ready"
+
+
+class ConflictError(ServiceError):
+    code = "conflict"
+
+
+class DescribeTimeoutError(ServiceError):
+    code = "describe_timeout"

@@ -1,0 +1,142 @@
+"""Ingestion: accept an upload (dedup by content hash, queue a job) and run the job in a worker."""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from app.core.mesh import InvalidMeshError, detect_format, load_mesh
+from app.core.pipeline import describe
+from app.services.context import ServiceContext
+from app.services.errors import InvalidInputError, NotFoundError, QueueFullError
+from app.services.vocabularies import load_vocabulary
+from app.storage import jobs as jobs_repo
+from app.storage import models as models_repo
+from app.storage import vocabularies as vocab_repo
+from app.storage.blobs import atomic_write, sha256_hex
+from app.storage.jobs import JobRecord
+from app.storage.models import ModelRecord
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Submitted:
+    model: ModelRecord
+    job_id: int | None  # None: identical content was already there, no new work
+    created: bool
+
+
+def parse_metadata(raw: str | None) -> dict:
+    if raw is None or raw.strip() == "":
+        return {}
+    try:
+        value = json.loads(raw)
+    except json.JSONDecodeError as exc:
+        raise InvalidInputError(f"metadata is not valid JSON: {exc.msg} at position {exc.pos}") from exc
+    if not isinstance(value, dict):
+        raise InvalidInputError("metadata must be a JSON object")
+    return value
+
+
+def submit(
+    ctx: ServiceContext,
+    data: bytes,
+    filename: str,
+    name: str | None = None,
+    label: str | None = None,
+    metadata: dict | None = None,
+) -> Submitted:
+    """Store the mesh (content-addressed) and queue its ingest job; identical content -> existing model.
+
+    The format is checked here (cheap); the geometry is checked by the worker, and a bad mesh fails
+    its job with the reason.
+    """
+    try:
+        file_type = detect_format(filename)
+    except InvalidMeshError as exc:
+        raise InvalidInputError(str(exc)) from exc
+    if not data:
+        raise InvalidInputError("the file is empty")
+    digest = sha256_hex(data)
+    with ctx.db.read() as conn:
+        existing = models_repo.get_by_sha256(conn, digest)
+    if existing is not None:
+        return Submitted(existing, None, False)
+    ctx.blobs.put_mesh(data, file_type)  # before the row: a worker must find the file
+    with ctx.db.write() as conn:
+        existing = models_repo.get_by_sha256(conn, digest)  # lost a race with the same upload
+        if existing is not None:
+            return Submitted(existing, None, False)
+        if jobs_repo.queue_depth(conn)["queued"] >= ctx.settings.queue_limit:
+            raise QueueFullError(
+                f"the ingestion queue is full ({ctx.settings.queue_limit} jobs): retry later"
+            )
+        model_id = models_repo.insert(
+            conn,
+            name=name or Path(filename).stem,
+            label=label or None,
+            metadata=metadata or {},
+            sha256=digest,
+            file_type=file_type,
+            size_bytes=len(data),
+        )
+        job_id = jobs_repo.enqueue(conn, "ingest", model_id=model_id)
+        model = models_repo.get(conn, model_id)
+    assert model is not None
+    return Submitted(model, job_id, True)
+
+
+def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
+    """Describe the model's mesh, cache the description, encode with the active vocabulary, mark ready.
+
+    Raises InvalidMeshError for a mesh that can never be described (the worker fails the job at once).
+    """
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    with ctx.db.read() as conn:
+        model = models_repo.get(conn, job.model_id) if job.model_id is not None else None
+    if model is None:
+        with ctx.db.write() as conn:
+            jobs_repo.mark_done(conn, job.id, {"note": "model was deleted before ingestion"})  # type: ignore[dict-item]
+        return timings
+    data = ctx.blobs.mesh_path(model.sha256, model.file_type).read_bytes()
+    mesh = load_mesh(data, model.file_type, max_vertices=ctx.settings.max_vertices)
+    timings["load"] = time.perf_counter() - t
+    description = describe(mesh, ctx.settings.describe.params())
+    timings.update({f"describe.{k}": v for k, v in description.seconds.items()})
+    desc_path = ctx.blobs.description_path(model.id)
+    atomic_write(desc_path, description.save)
+    for _ in range(5):  # encode with the active version; redo if a swap lands meanwhile
+        t = time.perf_counter()
+        with ctx.db.read() as conn:
+            active = vocab_repo.active(conn)
+        vector = None
+        if active is not None:
+            vector = load_vocabulary(ctx, active).encode(description, ctx.settings.encode.params())
+        timings["encode"] = time.perf_counter() - t
+        with ctx.db.write() as conn:
+            now_active = vocab_repo.active(conn)
+            if (now_active.id if now_active else None) != (active.id if active else None):
+                continue
+            if models_repo.get(conn, model.id) is None:
+                jobs_repo.mark_done(conn, job.id, dict(timings, note="model deleted during ingestion"))
+                desc_path.unlink(missing_ok=True)
+                return timings
+            if active is not None and vector is not None:
+                vocab_repo.put_vector(conn, model.id, active.id, vector)
+            models_repo.set_ready(conn, model.id, mesh.n_vertices)
+            jobs_repo.mark_done(conn, job.id, timings)
+        return timings
+    raise RuntimeError("the active vocabulary kept changing during ingestion")
+
+
+def get_model(ctx: ServiceContext, model_id: int) -> ModelRecord:
+    with ctx.db.read() as conn:
+        model = models_repo.get(conn, model_id)
+    if model is None:
+        raise NotFoundError(f"no model with id {model_id}")
+    return model

@@ -1,0 +1,167 @@
+"""The API process's view of the active (vocabulary, index) pair, kept in step with the database.
+
+Workers write BoF rows; this object follows them through a cursor on the rows' seq (cheap polling),
+swaps to a new vocabulary version when the database says another is active, and on load reconciles
+the saved index file with the stored vectors (a missing, unreadable or disagreeing file is rebuilt).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from app.core.pipeline import ShapeDescription
+from app.core.vocabulary import Vocabulary
+from app.index import IndexFileError, ShapeIndex, load_index, new_index
+from app.services.context import ServiceContext
+from app.services.errors import NotReadyError
+from app.services.vocabularies import encode_missing, load_vocabulary
+from app.storage import vocabularies as vocab_repo
+from app.storage.vocabularies import VocabularyRecord
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class ActivePair:
+    record: VocabularyRecord
+    vocabulary: Vocabulary
+    index: ShapeIndex
+    cursor: int  # highest bof.seq of this version already in `index`
+    dirty: bool = False
+    reconciled: str = ""  # what happened at load: "loaded" | "rebuilt: <why>"
+
+
+class LiveIndex:
+    def __init__(self, ctx: ServiceContext) -> None:
+        self.ctx = ctx
+        self._lock = threading.RLock()
+        self._refresh_lock = threading.Lock()
+        self.pair: ActivePair | None = None
+        self._deleted: set[int] = (
+            set()
+        )  # ids never come back (AUTOINCREMENT); a late poll must not re-add them
+        self.last_saved = time.monotonic()
+
+    # --- loading and following the database ---------------------------------------------------------
+
+    def _load_pair(self, record: VocabularyRecord) -> ActivePair:
+        vocab = load_vocabulary(self.ctx, record)
+        encode_missing(self.ctx, record.id)  # e.g. ready before any vocabulary existed
+        with self.ctx.db.read() as conn:
+            ids, vectors, cursor = vocab_repo.vectors(conn, record.id)
+        backend = self.ctx.settings.index_backend
+        path = self.ctx.index_path(record.id)
+        why = ""
+        try:
+            index = load_index(backend, path)
+            if index.dim != vocab.size:
+                why = f"dimension {index.dim} != {vocab.size} words"
+            elif not np.array_equal(index.ids(), np.sort(ids)):
+                why = f"{index.count} ids in the file, {len(ids)} in the database"
+        except IndexFileError as exc:
+            why = str(exc)
+        if why:
+            log.warning("index of vocabulary %d rebuilt from stored vectors: %s", record.id, why)
+            index = new_index(backend, vocab.size)
+            if len(ids):
+                index.add(ids, vectors)
+            index.save(path)
+        return ActivePair(record, vocab, index, cursor, reconciled=f"rebuilt: {why}" if why else "loaded")
+
+    def refresh(self) -> int:
+        """Follow the database: swap to a newly active version, add newly encoded models.
+
+        Returns the number of vectors added/replaced. Called periodically by the lifespan's poller.
+        """
+        with self._refresh_lock:
+            with self.ctx.db.read() as conn:
+                record = vocab_repo.active(conn)
+            if record is None:
+                return 0
+            current = self.pair
+            if current is None or current.record.id != record.id:
+                pair = self._load_pair(record)  # outside the search lock: queries use the old pair
+                with self._lock:
+                    old, self.pair = self.pair, pair
+                if old is not None and old.dirty:
+                    old.index.save(self.ctx.index_path(old.record.id))
+                log.info(
+                    "now serving vocabulary version %d (%d models, %s)",
+                    record.id,
+                    pair.index.count,
+                    pair.reconciled,
+                )
+                return pair.index.count
+            with self.ctx.db.read() as conn:
+                ids, vectors, cursor = vocab_repo.vectors(conn, record.id, current.cursor)
+            if len(ids) == 0:
+                return 0
+            last = {int(i): k for k, i in enumerate(ids)}  # a model re-encoded twice: keep its last row
+            with self._lock:
+                keep = np.array(sorted(k for i, k in last.items() if i not in self._deleted), dtype=np.int64)
+                current.cursor = cursor
+                if len(keep) == 0:
+                    return 0
+                current.index.add(ids[keep], vectors[keep])
+                current.dirty = True
+            return len(keep)
+
+    def remove(self, model_ids: list[int]) -> None:
+        with self._lock:
+            self._deleted.update(int(i) for i in model_ids)
+            if self.pair is not None and self.pair.index.remove(np.asarray(model_ids, np.int64)):
+                self.pair.dirty = True
+
+    def save(self, force: bool = False) -> bool:
+        """Persist the index if it changed (periodically and at shutdown)."""
+        with self._lock:
+            pair = self.pair
+            if pair is None or not (pair.dirty or force):
+                return False
+            pair.index.save(self.ctx.index_path(pair.record.id))
+            pair.dirty = False
+        self.last_saved = time.monotonic()
+        return True
+
+    # --- answering ------------------------------------------------------------------------------------
+
+    def require(self) -> ActivePair:
+        pair = self.pair
+        if pair is None:
+            raise NotReadyError(
+                "no vocabulary is active yet: an admin must run POST /admin/vocabulary/rebuild"
+                " once models are ready"
+            )
+        return pair
+
+    def encode(self, description: ShapeDescription) -> tuple[int, np.ndarray]:
+        """(vocabulary id, (v,) float32 BoF) of a query, with the pair that will answer it."""
+        pair = self.require()
+        return pair.record.id, pair.vocabulary.encode(description, self.ctx.settings.encode.params())
+
+    def search(
+        self,
+        vector: np.ndarray,
+        k: int,
+        allowed_ids: np.ndarray | None = None,
+        vocabulary_id: int | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, int]:
+        """vector (v,) -> distances (k,), ids (k,) and the version that answered (-1 ids dropped)."""
+        with self._lock:
+            pair = self.require()
+            if vocabulary_id is not None and vocabulary_id != pair.record.id:
+                raise NotReadyError("the vocabulary changed while the query was encoded; retry")
+            dist, ids = pair.index.search(vector.reshape(1, -1), k, allowed_ids)
+        keep = ids[0] >= 0
+        return dist[0][keep], ids[0][keep], pair.record.id
+
+    def status(self) -> dict:
+        pair = self.pair
+        if pair is None:
+            return {"vocabulary_id": None, "indexed": 0, "words": None}
+        return {"vocabulary_id": pair.record.id, "indexed": pair.index.count, "words": pair.vocabulary.size}

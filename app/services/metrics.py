@@ -1,0 +1,59 @@
+"""Prometheus metrics of one app instance (its own registry, so several apps can live in one process)."""
+
+from __future__ import annotations
+
+import json
+
+from prometheus_client import CollectorRegistry, Gauge, Histogram, generate_latest
+
+from app.services.context import ServiceContext
+from app.storage import jobs as jobs_repo
+from app.storage import models as models_repo
+
+LATENCY_BUCKETS = (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30)
+
+
+class Metrics:
+    def __init__(self) -> None:
+        self.registry = CollectorRegistry()
+        self.request_seconds = Histogram(
+            "shapebag_request_seconds",
+            "HTTP request latency",
+            ["method", "route", "status"],
+            buckets=LATENCY_BUCKETS,
+            registry=self.registry,
+        )
+        self.describe_seconds = Histogram(
+            "shapebag_describe_seconds",
+            "time to describe one mesh (load + spectrum + HKS + keypoints)",
+            ["where"],
+            buckets=LATENCY_BUCKETS,
+            registry=self.registry,
+        )
+        self.queue_depth = Gauge(
+            "shapebag_queue_depth", "jobs waiting or running", ["state"], registry=self.registry
+        )
+        self.models = Gauge("shapebag_models", "models by status", ["status"], registry=self.registry)
+        self.indexed = Gauge("shapebag_indexed_models", "vectors in the active index", registry=self.registry)
+        self._last_job = 0
+
+    def render(self, ctx: ServiceContext, indexed: int) -> bytes:
+        """Refresh the gauges from the database, then render the text exposition format."""
+        with ctx.db.read() as conn:
+            for state, n in jobs_repo.queue_depth(conn).items():
+                self.queue_depth.labels(state).set(n)
+            for status, n in models_repo.count_by_status(conn).items():
+                self.models.labels(status).set(n)
+            rows = conn.execute(  # ingest jobs finished by workers since the last scrape
+                "SELECT id, timings FROM jobs WHERE kind = 'ingest' AND state = 'done' AND id > ?"
+                " ORDER BY id",
+                (self._last_job,),
+            ).fetchall()
+        for row in rows:
+            t = json.loads(row["timings"] or "{}")
+            spent = sum(v for k, v in t.items() if k == "load" or k.startswith("describe."))
+            if spent:
+                self.describe_seconds.labels("ingest").observe(spent)
+            self._last_job = row["id"]
+        self.indexed.set(indexed)
+        return generate_latest(self.registry)

@@ -1,0 +1,74 @@
+"""Describing query meshes off the event loop: a process pool owned by the lifespan, with a time limit."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import multiprocessing as mp
+import time
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+
+from app.core.mesh import load_mesh
+from app.core.pipeline import DescribeParams, ShapeDescription, describe
+from app.services.errors import DescribeTimeoutError
+from app.worker.processes import pin_threads
+
+log = logging.getLogger(__name__)
+
+
+def describe_bytes(
+    data: bytes, file_type: str, params: DescribeParams, max_vertices: int
+) -> tuple[ShapeDescription, dict[str, float]]:
+    """Runs in a pool process: bytes -> description and seconds per stage (load + describe stages)."""
+    t = time.perf_counter()
+    mesh = load_mesh(data, file_type, max_vertices=max_vertices)
+    seconds = {"load": time.perf_counter() - t}
+    description = describe(mesh, params)
+    seconds.update(description.seconds)
+    return description, seconds
+
+
+class QueryDescriber:
+    def __init__(self, processes: int, params: DescribeParams, max_vertices: int, timeout_s: float) -> None:
+        self.processes = processes
+        self.params = params
+        self.max_vertices = max_vertices
+        self.timeout_s = timeout_s
+        self._pool = self._new_pool()
+
+    def _new_pool(self) -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(
+            self.processes, mp_context=mp.get_context("spawn"), initializer=pin_threads
+        )
+
+    async def describe(self, data: bytes, file_type: str) -> tuple[ShapeDescription, dict[str, float]]:
+        """Raises InvalidMeshError (from the pool process) or DescribeTimeoutError."""
+        loop = asyncio.get_running_loop()
+        pool = self._pool
+        future = loop.run_in_executor(pool, describe_bytes, data, file_type, self.params, self.max_vertices)
+        try:
+            return await asyncio.wait_for(future, self.timeout_s)
+        except TimeoutError:
+            self._restart(pool)  # a runaway solve must not hold a pool process forever
+            raise DescribeTimeoutError(
+                f"describing the query mesh took longer than {self.timeout_s:g} s; send a smaller mesh"
+            ) from None
+        except BrokenProcessPool:
+            self._restart(pool)
+            raise
+
+    def _restart(self, pool: ProcessPoolExecutor) -> None:
+        if pool is not self._pool:
+            return
+        self._pool = self._new_pool()
+        for proc in list(getattr(pool, "_processes", {}).values()):  # no public API to kill a busy worker
+            proc.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+
+    def warm_up(self) -> None:
+        """Start the pool processes now rather than on the first query."""
+        list(self._pool.map(int, range(self.processes)))
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)

@@ -1,0 +1,98 @@
+"""Ranked answers: a query's BoF (or a stored model's) against the active index, with model metadata."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from app.core.pipeline import ShapeDescription
+from app.services.context import ServiceContext
+from app.services.errors import InvalidInputError, NotFoundError, NotReadyError
+from app.services.live_index import LiveIndex
+from app.storage import models as models_repo
+from app.storage import vocabularies as vocab_repo
+from app.storage.models import ModelRecord
+
+MAX_K = 100
+
+
+@dataclass(frozen=True)
+class Hit:
+    model: ModelRecord
+    distance: float
+    rank: int
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    hits: list[Hit]
+    vocabulary_id: int
+    seconds: dict[str, float]
+
+
+def check_k(k: int) -> int:
+    if not 1 <= k <= MAX_K:
+        raise InvalidInputError(f"k must be between 1 and {MAX_K}, got {k}")
+    return k
+
+
+def _allowed(ctx: ServiceContext, label: str | None) -> np.ndarray | None:
+    if label is None or label == "":
+        return None
+    with ctx.db.read() as conn:
+        return np.asarray(models_repo.ids_with_label(conn, label), np.int64)
+
+
+def _hits(ctx: ServiceContext, dist: np.ndarray, ids: np.ndarray, k: int) -> list[Hit]:
+    with ctx.db.read() as conn:
+        records = models_repo.get_many(conn, [int(i) for i in ids])
+    hits: list[Hit] = []
+    for d, i in zip(dist, ids, strict=True):
+        rec = records.get(int(i))
+        if rec is not None and len(hits) < k:  # deleted a moment ago: skip
+            hits.append(Hit(rec, float(d), len(hits) + 1))
+    return hits
+
+
+def search_description(
+    ctx: ServiceContext, live: LiveIndex, description: ShapeDescription, k: int, label: str | None = None
+) -> SearchResult:
+    check_k(k)
+    allowed = _allowed(ctx, label)
+    for _ in range(3):  # a vocabulary swap between encode and search: encode again
+        t = time.perf_counter()
+        vid, vector = live.encode(description)
+        t_encode = time.perf_counter() - t
+        t = time.perf_counter()
+        try:
+            dist, ids, vid = live.search(vector, k, allowed, vocabulary_id=vid)
+        except NotReadyError:
+            if live.pair is None:
+                raise
+            continue
+        t_search = time.perf_counter() - t
+        return SearchResult(_hits(ctx, dist, ids, k), vid, {"encode": t_encode, "search": t_search})
+    raise NotReadyError("the vocabulary is being swapped; retry")
+
+
+def similar(
+    ctx: ServiceContext, live: LiveIndex, model_id: int, k: int, label: str | None = None
+) -> SearchResult:
+    """Models nearest to a stored one (itself excluded)."""
+    check_k(k)
+    t = time.perf_counter()
+    pair = live.require()
+    with ctx.db.read() as conn:
+        model = models_repo.get(conn, model_id)
+        vector = vocab_repo.vector_of(conn, model_id, pair.record.id) if model else None
+    if model is None:
+        raise NotFoundError(f"no model with id {model_id}")
+    if vector is None:
+        raise NotReadyError(f"model {model_id} is {model.status}, not yet indexed")
+    allowed = _allowed(ctx, label)
+    dist, ids, vid = live.search(vector, k + 1, allowed)
+    keep = ids != model_id
+    hits = _hits(ctx, dist[keep], ids[keep], k)
+    return SearchResult(hits, vid, {"search": time.perf_counter() - t})

@@ -1,0 +1,180 @@
+"""Vocabulary versions: register the shipped default, load, rebuild (fit -> encode -> index -> swap)."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from app.core.pipeline import ShapeDescription
+from app.core.vocabulary import Vocabulary
+from app.index import new_index
+from app.services.context import ServiceContext
+from app.services.errors import InvalidInputError
+from app.storage import jobs as jobs_repo
+from app.storage import models as models_repo
+from app.storage import vocabularies as vocab_repo
+from app.storage.vocabularies import VocabularyRecord
+
+log = logging.getLogger(__name__)
+_cache: dict[tuple[str, int], Vocabulary] = {}
+_cache_lock = threading.Lock()
+
+
+def load_vocabulary(ctx: ServiceContext, record: VocabularyRecord) -> Vocabulary:
+    """Vocabulary of a version (versions are immutable, so a per-process cache is safe)."""
+    key = (str(ctx.data_dir), record.id)
+    with _cache_lock:
+        if key not in _cache:
+            _cache[key] = Vocabulary.load(ctx.data_dir / record.path)
+        return _cache[key]
+
+
+def register(ctx: ServiceContext, vocab: Vocabulary, activate: bool) -> int:
+    """Save `vocab` as a new version (files first, then the row); returns its id."""
+    with ctx.db.write() as conn:
+        vid = vocab_repo.insert(
+            conn,
+            path="",
+            trained_on=int(vocab.metadata.get("trained_on_descriptors", 0)),
+            size=vocab.size,
+            run=vocab.run,
+            metadata=vocab.describe_meta(),
+            created_at=vocab.metadata.get("created_at"),
+        )
+        directory = ctx.vocabulary_dir(vid)
+        vocab.save(directory)
+        vocab_repo.set_path(conn, vid, str(directory.relative_to(ctx.data_dir)))
+        if activate:
+            vocab_repo.activate(conn, vid)
+    return vid
+
+
+def ensure_default(ctx: ServiceContext) -> int | None:
+    """With no vocabulary version yet, register and activate the shipped default (if there is one)."""
+    path = ctx.settings.default_vocabulary
+    with ctx.db.read() as conn:
+        if vocab_repo.all_versions(conn):
+            return None
+    if path is None or not (Path(path) / "vocabulary.json").is_file():
+        log.warning("no vocabulary: none shipped at %s; fit one with POST /admin/vocabulary/rebuild", path)
+        return None
+    vocab = Vocabulary.load(path)
+    with ctx.db.write() as conn:  # re-check under the write lock: another process may have won
+        if vocab_repo.all_versions(conn):
+            return None
+    vid = register(ctx, vocab, activate=True)
+    log.info("registered the shipped vocabulary %s as version %d", path, vid)
+    return vid
+
+
+def load_descriptions(ctx: ServiceContext, model_ids: list[int]) -> tuple[list[int], list[ShapeDescription]]:
+    """Cached descriptions of `model_ids` (models whose file is gone are skipped)."""
+    ids, descs = [], []
+    for mid in model_ids:
+        path = ctx.blobs.description_path(mid)
+        if path.is_file():
+            ids.append(mid)
+            descs.append(ShapeDescription.load(path))
+        else:
+            log.warning("model %d is ready but its description %s is missing", mid, path)
+    return ids, descs
+
+
+def encode_all(ctx: ServiceContext, vocab: Vocabulary, descs: list[ShapeDescription]) -> np.ndarray:
+    """(n, v) float32 BoF vectors."""
+    params = ctx.settings.encode.params()
+    if not descs:
+        return np.zeros((0, vocab.size), np.float32)
+    return np.stack([vocab.encode(d, params) for d in descs])
+
+
+def rebuild_vocabulary(
+    ctx: ServiceContext, job_id: int, payload: dict, keep_alive: Callable[[], None] = lambda: None
+) -> dict:
+    """Fit a new vocabulary on the stored descriptions, encode every model, build its index, swap.
+
+    Queries keep using the old pair until the swap; models that became ready meanwhile are encoded
+    with the new vocabulary right after it (encode_missing).
+    """
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    size = int(payload.get("size") or ctx.settings.vocabulary_size)
+    run = str(payload.get("run") or ctx.settings.vocabulary_run)
+    seed = int(payload.get("seed") or 0)
+    with ctx.db.read() as conn:
+        ids = models_repo.ready_ids(conn)
+    ids, descs = load_descriptions(ctx, ids)
+    if not descs:
+        raise InvalidInputError("no ready models to fit a vocabulary on: ingest some first")
+    timings["load_descriptions"] = time.perf_counter() - t
+    keep_alive()
+    t = time.perf_counter()
+    vocab = Vocabulary.fit(descs, size=size, run=run, seed=seed, metadata={"models": len(descs)})
+    timings["fit"] = time.perf_counter() - t
+    keep_alive()
+    t = time.perf_counter()
+    vid = register(ctx, vocab, activate=False)
+    vectors = encode_all(ctx, vocab, descs)
+    index = new_index(ctx.settings.index_backend, vocab.size)
+    index.add(np.asarray(ids, np.int64), vectors)
+    index.save(ctx.index_path(vid))
+    timings["encode_and_index"] = time.perf_counter() - t
+    keep_alive()
+    with ctx.db.write() as conn:  # the swap: vectors + active flag in ONE transaction
+        alive = set(models_repo.get_many(conn, ids))
+        for mid, vec in zip(ids, vectors, strict=True):
+            if mid in alive:  # deleted during the rebuild: skip
+                vocab_repo.put_vector(conn, mid, vid, vec)
+        vocab_repo.activate(conn, vid)
+    timings["encoded_after_swap"] = float(len(encode_missing(ctx, vid)))
+    with ctx.db.write() as conn:
+        jobs_repo.mark_done(conn, job_id, dict(timings, vocabulary_id=vid, models=len(ids)))
+    log.info("vocabulary version %d active (%d words, %d models)", vid, vocab.size, len(ids))
+    return timings
+
+
+def encode_missing(ctx: ServiceContext, vocabulary_id: int) -> list[int]:
+    """Encode ready models that have no BoF for this version yet; returns their ids."""
+    with ctx.db.read() as conn:
+        record = vocab_repo.get(conn, vocabulary_id)
+        missing = vocab_repo.ready_without_vector(conn, vocabulary_id)
+    if record is None or not missing:
+        return []
+    vocab = load_vocabulary(ctx, record)
+    ids, descs = load_descriptions(ctx, missing)
+    vectors = encode_all(ctx, vocab, descs)
+    with ctx.db.write() as conn:
+        alive = set(models_repo.get_many(conn, ids))
+        for mid, vec in zip(ids, vectors, strict=True):
+            if mid in alive:
+                vocab_repo.put_vector(conn, mid, vocabulary_id, vec)
+    return ids
+
+
+def reencode_active(ctx: ServiceContext, job_id: int) -> dict:
+    """rebuild_index job: re-encode every ready model with the active vocabulary from its description.
+
+    The API process sees the new rows (new seq) and replaces them in its index.
+    """
+    t = time.perf_counter()
+    with ctx.db.read() as conn:
+        record = vocab_repo.active(conn)
+        ids = models_repo.ready_ids(conn)
+    if record is None:
+        raise InvalidInputError("no active vocabulary: rebuild the vocabulary first")
+    vocab = load_vocabulary(ctx, record)
+    ids, descs = load_descriptions(ctx, ids)
+    vectors = encode_all(ctx, vocab, descs)
+    timings = {"encode": time.perf_counter() - t, "models": len(ids), "vocabulary_id": record.id}
+    with ctx.db.write() as conn:
+        alive = set(models_repo.get_many(conn, ids))
+        for mid, vec in zip(ids, vectors, strict=True):
+            if mid in alive:
+                vocab_repo.put_vector(conn, mid, record.id, vec)
+        jobs_repo.mark_done(conn, job_id, timings)
+    return timings

@@ -1,0 +1,67 @@
+"""Files under the data directory: uploaded meshes (content-addressed), descriptions, thumbnails.
+
+Every write goes temp file -> fsync -> rename, so a reader never sees half a file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+
+def atomic_write(path: Path, data: bytes | Callable[[Path], None]) -> Path:
+    """Write bytes (or let `data(tmp_path)` write) to a temp file beside `path`, fsync, rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    tmp = Path(tmp_name)
+    try:
+        if callable(data):
+            os.close(fd)
+            data(tmp)
+        else:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def sha256_hex(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+class BlobStore:
+    """meshes/<ab>/<sha256>.<ext>, descriptions/<model id>.npz, thumbnails/<model id>-<size>.png"""
+
+    def __init__(self, root: Path) -> None:
+        self.root = Path(root)
+
+    def mesh_path(self, sha256: str, file_type: str) -> Path:
+        return self.root / "meshes" / sha256[:2] / f"{sha256}.{file_type}"
+
+    def put_mesh(self, data: bytes, file_type: str) -> tuple[str, Path]:
+        digest = sha256_hex(data)
+        path = self.mesh_path(digest, file_type)
+        if not path.exists():
+            atomic_write(path, data)
+        return digest, path
+
+    def description_path(self, model_id: int) -> Path:
+        return self.root / "descriptions" / f"{model_id}.npz"
+
+    def thumbnail_path(self, model_id: int, size: int) -> Path:
+        return self.root / "thumbnails" / f"{model_id}-{size}.png"
+
+    def delete_model_files(self, model_id: int, sha256: str, file_type: str) -> None:
+        """Remove the mesh, description and cached thumbnails of one model (missing files are fine)."""
+        self.mesh_path(sha256, file_type).unlink(missing_ok=True)
+        self.description_path(model_id).unlink(missing_ok=True)
+        for thumb in (self.root / "thumbnails").glob(f"{model_id}-*.png"):
+            thumb.unlink(missing_ok=True)

@@ -1,0 +1,93 @@
+"""Worker processes (spawn context), each with BLAS pinned to one thread: N processes, N cores."""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing as mp
+import os
+import signal
+from multiprocessing.process import BaseProcess
+from multiprocessing.synchronize import Event
+
+from app.config import Settings
+
+log = logging.getLogger(__name__)
+
+THREAD_VARS = (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+)
+
+
+def pin_threads() -> None:
+    """One BLAS/OpenMP thread per process (set before numpy is imported in a fresh process)."""
+    for var in THREAD_VARS:
+        os.environ[var] = "1"
+    try:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(1)
+    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
+        pass
+
+
+def worker_main(settings_json: str, name: str, stop: Event) -> None:
+    """Entry point of one spawned worker process."""
+    pin_threads()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent owns shutdown; Ctrl-C reaches the group
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(processName)s %(levelname)s %(message)s")
+    from app.services.context import open_context
+    from app.worker.runner import Worker
+
+    ctx = open_context(Settings.model_validate_json(settings_json))
+    Worker(ctx, name).run_forever(stop)  # type: ignore[arg-type]
+
+
+class WorkerPool:
+    """The embedded ingestion workers owned by the server's lifespan (or by `shapebag worker`)."""
+
+    def __init__(self, settings: Settings, count: int, prefix: str = "embedded") -> None:
+        self.settings = settings
+        self.count = count
+        self.prefix = prefix
+        self._mp = mp.get_context("spawn")
+        self._stop = self._mp.Event()
+        self.processes: list[BaseProcess] = []
+
+    def start(self) -> None:
+        saved = {v: os.environ.get(v) for v in THREAD_VARS}
+        os.environ.update({v: "1" for v in THREAD_VARS})  # inherited by the spawned interpreter
+        try:
+            for i in range(self.count):
+                name = f"{self.prefix}-{os.getpid()}-{i}"
+                p = self._mp.Process(
+                    target=worker_main,
+                    args=(self.settings.model_dump_json(), name, self._stop),
+                    name=name,
+                    daemon=True,
+                )
+                p.start()
+                self.processes.append(p)
+        finally:
+            for var, value in saved.items():
+                if value is None:
+                    os.environ.pop(var, None)
+                else:
+                    os.environ[var] = value
+        log.info("started %d worker processes", self.count)
+
+    def alive(self) -> int:
+        return sum(p.is_alive() for p in self.processes)
+
+    def stop(self, timeout_s: float = 10.0) -> None:
+        """Ask workers to finish their current job, then terminate stragglers (their leases expire)."""
+        self._stop.set()
+        for p in self.processes:
+            p.join(timeout_s)
+            if p.is_alive():
+                p.terminate()
+                p.join(2)
+        self.processes.clear()

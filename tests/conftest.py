@@ -1,0 +1,130 @@
+"""Shared fixtures for the service tests: small labelled corpora, settings over temporary data dirs,
+a seeded data directory (models ingested, a small vocabulary fitted) that tests copy and mutate."""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from app.config import DescribeSettings, Settings
+
+SHREC = Path(
+    os.environ.get(
+        "SHAPEBAG_SHREC", Path(__file__).resolve().parents[2] / "shared" / "datasets" / "shrec11-simplified"
+    )
+)
+CLASSES = 4
+PER_CLASS = 4  # 3 seeded + 1 held out for uploads
+TEST_WORDS = 16
+
+
+@dataclass(frozen=True)
+class Corpus:
+    root: Path
+    files: list[tuple[Path, str]]  # (path, label), PER_CLASS per class, grouped by class
+
+    @property
+    def seeded(self) -> list[tuple[Path, str]]:
+        return [f for i, f in enumerate(self.files) if i % PER_CLASS != PER_CLASS - 1]
+
+    @property
+    def held_out(self) -> list[tuple[Path, str]]:
+        return [f for i, f in enumerate(self.files) if i % PER_CLASS == PER_CLASS - 1]
+
+
+def _pick(root: Path) -> list[tuple[Path, str]]:
+    by_class: dict[str, list[Path]] = {}
+    with open(root / "labels.csv", newline="") as fh:
+        for row in csv.DictReader(fh):
+            by_class.setdefault(row["class"], []).append(root / row["file"])
+    chosen = sorted(by_class)[:CLASSES]
+    return [(p, c) for c in chosen for p in sorted(by_class[c])[:PER_CLASS]]
+
+
+@pytest.fixture(scope="session")
+def corpus(tmp_path_factory) -> Corpus:
+    """A few SHREC'11 meshes (~250 vertices) when the dataset is present, else a synthetic corpus."""
+    if (SHREC / "labels.csv").is_file():
+        return Corpus(SHREC, _pick(SHREC))
+    from app.datasets.synthetic import generate
+
+    root = generate(tmp_path_factory.mktemp("synthetic"), classes=CLASSES, per_class=PER_CLASS, seed=0)
+    return Corpus(Path(root), _pick(Path(root)))
+
+
+def make_settings(data_dir: Path, **overrides) -> Settings:
+    """Fast settings for tests: a cheap spectrum, one worker, a small vocabulary, no shipped default."""
+    base = dict(
+        data_dir=data_dir,
+        dev_mode=True,
+        admin_token="test-token",
+        workers=1,
+        search_processes=1,
+        describe=DescribeSettings(k=40, m=20, target_vertices=0),
+        default_vocabulary=None,
+        vocabulary_size=TEST_WORDS,
+        auto_vocabulary_min_models=10**6,
+        poll_interval_s=0.1,
+        lease_seconds=20.0,
+        describe_timeout_s=60.0,
+    )
+    base.update(overrides)
+    return Settings(**base)
+
+
+@pytest.fixture
+def settings(tmp_path) -> Settings:
+    return make_settings(tmp_path / "data")
+
+
+@pytest.fixture(scope="session")
+def seeded_dir(tmp_path_factory, corpus) -> Path:
+    """A data dir with the seeded corpus ingested and a TEST_WORDS-word vocabulary active (built once)."""
+    from app.services import ingestion
+    from app.services.context import open_context
+    from app.storage import jobs as jobs_repo
+    from app.worker.runner import Worker
+
+    data_dir = tmp_path_factory.mktemp("seeded") / "data"
+    ctx = open_context(make_settings(data_dir))
+    for path, label in corpus.seeded:
+        ingestion.submit(ctx, path.read_bytes(), path.name, name=f"{label}-{path.stem}", label=label)
+    worker = Worker(ctx, "seed")
+    worker.run_forever(exit_when_idle=True)
+    with ctx.db.write() as conn:
+        jobs_repo.enqueue(conn, "rebuild_vocabulary", payload={"size": TEST_WORDS})
+    worker.run_forever(exit_when_idle=True)
+    return data_dir
+
+
+@pytest.fixture
+def data_dir(seeded_dir, tmp_path) -> Path:
+    """A private copy of the seeded data dir, free to mutate."""
+    return Path(shutil.copytree(seeded_dir, tmp_path / "data"))
+
+
+def wait_for(predicate, timeout_s: float = 60.0, interval_s: float = 0.1):
+    """Poll `predicate()` until it returns something truthy; fail the test on timeout."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(interval_s)
+    pytest.fail(f"condition not met within {timeout_s} s")
+
+
+def wait_job(client, job_id: int, timeout_s: float = 90.0) -> dict:
+    """GET /jobs/{id} until it is done or failed."""
+
+    def finished():
+        body = client.get(f"/jobs/{job_id}").json()
+        return body if body["state"] in ("done", "failed") else None
+
+    return wait_for(finished, timeout_s)
