@@ -1,0 +1,60 @@
+# shapebag container image: `docker compose up -d --build --wait` (see docs/deploy.md).
+#
+# Any Debian-like image with Python >= 3.11 and venv works as the base; where no registry is reachable use
+# the locally built one:  docker build --build-arg BASE_IMAGE=localhost/debian-python:bookworm -t shapebag .
+# The base's pip settings (PIP_CERT, SSL_CERT_FILE: a proxy CA) are inherited by both stages, untouched.
+ARG BASE_IMAGE=python:3.12-slim
+
+# ---- builder: a virtual environment with the dependencies, then the package (no deps) on top ----
+FROM ${BASE_IMAGE} AS builder
+ENV PIP_NO_CACHE_DIR=1 \
+    PIP_DISABLE_PIP_VERSION_CHECK=1 \
+    PATH=/opt/venv/bin:$PATH
+RUN python3 -m venv /opt/venv
+WORKDIR /src
+
+# Dependencies get their own layer, keyed on pyproject.toml only: a code change does not reinstall them.
+# The list is read from [project].dependencies (tomllib: Python >= 3.11) so it has one source of truth.
+COPY pyproject.toml ./
+RUN python3 -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies']))" \
+        > /tmp/requirements.txt \
+    && pip install --prefer-binary -r /tmp/requirements.txt "setuptools>=68" wheel \
+    && rm /tmp/requirements.txt \
+    && find /opt/venv -depth -type d -name tests -prune -exec rm -rf {} +
+# (the libraries' own test suites are ~70 MB of the venv and never imported at runtime)
+
+# README.md* : optional (pyproject names it as the long description when present)
+COPY pyproject.toml README.md* ./
+COPY app/ ./app/
+# no build isolation: the build backend is already in the venv, so a code-only rebuild needs no network;
+# then the backend and pip leave the venv, they have no use at runtime
+RUN pip install --no-deps --no-build-isolation . \
+    && pip uninstall -q -y setuptools wheel pip \
+    && python3 -c "import app.cli"
+
+# ---- runtime: the venv and the shipped data only; no pip cache, no build tools, no sources ----
+FROM ${BASE_IMAGE}
+ENV PATH=/opt/venv/bin:$PATH \
+    PYTHONDONTWRITEBYTECODE=1 \
+    PYTHONUNBUFFERED=1 \
+    SHAPEBAG_DATA_DIR=/data \
+    SHAPEBAG_DEFAULT_VOCABULARY=/opt/shapebag/shipped/vocabulary/default
+# a fixed uid so that files on the /data volume keep one owner across rebuilds
+RUN groupadd --gid 10001 shapebag \
+    && useradd --uid 10001 --gid shapebag --no-log-init --no-create-home --home-dir /opt/shapebag \
+        --shell /usr/sbin/nologin shapebag \
+    && mkdir -p /data /opt/shapebag \
+    && chown shapebag:shapebag /data
+COPY --from=builder /opt/venv /opt/venv
+# The shipped default vocabulary (data/vocabulary/default, small, committed): the installed package cannot
+# find it next to app/, hence SHAPEBAG_DEFAULT_VOCABULARY. A directory source is copied by its contents
+# (data/vocabulary -> shipped/vocabulary); pyproject.toml rides along so the COPY still has a source in a
+# checkout without data/ (the service then fits a vocabulary itself once enough models are ready).
+COPY pyproject.toml data* /opt/shapebag/shipped/
+WORKDIR /opt/shapebag
+USER 10001:10001
+VOLUME /data
+EXPOSE 8000
+HEALTHCHECK --interval=15s --timeout=5s --start-period=60s --retries=3 \
+    CMD ["python3", "-c", "import os, urllib.request; urllib.request.urlopen('http://127.0.0.1:%s/healthz' % os.environ.get('SHAPEBAG_PORT', '8000'), timeout=4)"]
+CMD ["shapebag", "serve", "--host", "0.0.0.0"]
