@@ -1,0 +1,105 @@
+"""Worker outcomes, a swap racing an ingestion, and the live index following/reconciling the database."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.core.vocabulary import Vocabulary
+from app.index import new_index
+from app.services import ingestion
+from app.services import vocabularies as vocab_service
+from app.services.context import open_context
+from app.services.live_index import LiveIndex
+from app.storage import jobs as jobs_repo
+from app.storage import models as models_repo
+from app.storage import vocabularies as vocab_repo
+from app.worker.runner import Worker
+from tests.conftest import make_settings
+
+
+def _job(ctx, job_id):
+    with ctx.db.read() as conn:
+        return jobs_repo.get(conn, job_id)
+
+
+def test_invalid_mesh_fails_at_once_and_transient_errors_retry(tmp_path, monkeypatch, corpus):
+    ctx = open_context(make_settings(tmp_path / "d", max_attempts=2))
+    bad = ingestion.submit(ctx, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "tri.obj")
+    Worker(ctx, "w").run_once()
+    job = _job(ctx, bad.job_id)
+    assert job.state == "failed" and job.attempts == 1 and job.error
+    # a fault that might pass (here: always) is retried until attempts run out
+    path, _ = corpus.seeded[0]
+    sub = ingestion.submit(ctx, path.read_bytes(), path.name)
+
+    def boom(*a, **k):
+        raise OSError("disk hiccup")
+
+    monkeypatch.setattr(ingestion, "describe", boom)
+    Worker(ctx, "w").run_once()
+    assert _job(ctx, sub.job_id).state == "queued" and "disk hiccup" in _job(ctx, sub.job_id).error
+    Worker(ctx, "w").run_once()
+    job = _job(ctx, sub.job_id)
+    assert job.state == "failed" and "gave up after 2 attempts" in job.error
+    with ctx.db.read() as conn:
+        assert models_repo.get(conn, sub.model.id).status == "failed"
+    assert ctx.blobs.mesh_path(sub.model.sha256, "obj").is_file()  # the upload stays on disk
+
+
+def test_ingestion_racing_a_swap_ends_encoded_with_the_new_vocabulary(data_dir, corpus, monkeypatch):
+    ctx = open_context(make_settings(data_dir))
+    with ctx.db.read() as conn:
+        old = vocab_repo.active(conn)
+    rng = np.random.default_rng(0)
+    replacement = Vocabulary.fit_features(rng.random((200, 4)), size=8, run="run5")
+    new_id = vocab_service.register(ctx, replacement, activate=False)
+    path, _ = corpus.held_out[2]
+    sub = ingestion.submit(ctx, path.read_bytes(), path.name)
+    real = ingestion.load_vocabulary
+    calls = []
+
+    def swap_after_encode(c, record):
+        calls.append(record.id)
+        if len(calls) == 1:  # the swap lands between this encode and the commit
+            with ctx.db.write() as conn:
+                vocab_repo.activate(conn, new_id)
+        return real(c, record)
+
+    monkeypatch.setattr(ingestion, "load_vocabulary", swap_after_encode)
+    Worker(ctx, "w").run_once()
+    assert calls == [old.id, new_id]
+    with ctx.db.read() as conn:
+        assert vocab_repo.vector_of(conn, sub.model.id, new_id) is not None
+        assert vocab_repo.vector_of(conn, sub.model.id, old.id) is None
+    assert _job(ctx, sub.job_id).state == "done"
+
+
+def test_live_index_follows_new_vectors_and_rebuilds_a_disagreeing_file(data_dir):
+    ctx = open_context(make_settings(data_dir))
+    live = LiveIndex(ctx)
+    live.refresh()
+    pair = live.pair
+    n = pair.index.count
+    assert pair.reconciled in ("loaded", "rebuilt: no index file at " + str(ctx.index_path(pair.record.id)))
+    ids = pair.index.ids()
+    # a re-encoded vector (new seq) replaces the old one in the live index
+    with ctx.db.write() as conn:
+        vocab_repo.put_vector(conn, int(ids[0]), pair.record.id, np.eye(pair.vocabulary.size)[0])
+    assert live.refresh() == 1 and live.pair.index.count == n
+    dist, got, _ = live.search(np.eye(pair.vocabulary.size, dtype=np.float32)[0], 1)
+    assert got[0] == ids[0] and dist[0] == pytest.approx(0.0)
+    live.remove([int(ids[0])])
+    assert live.pair.index.count == n - 1
+    assert live.refresh() == 0  # a deleted id is not brought back by a late poll
+    live.save()
+    # a file that disagrees with the database (one id missing) is rebuilt on load
+    stale = new_index(ctx.settings.index_backend, pair.vocabulary.size)
+    with ctx.db.read() as conn:
+        all_ids, vectors, _ = vocab_repo.vectors(conn, pair.record.id)
+    stale.add(all_ids[1:], vectors[1:])
+    stale.save(ctx.index_path(pair.record.id))
+    fresh = LiveIndex(ctx)
+    fresh.refresh()
+    assert fresh.pair.reconciled.startswith("rebuilt")
+    np.testing.assert_array_equal(fresh.pair.index.ids(), np.sort(all_ids))
