@@ -5,9 +5,10 @@ BIN     := $(VENV)/bin
 DATA    ?= var/data
 PORT    ?= 8000
 DATASET ?= ../shared/datasets/shrec11-simplified
+DOCKER_UP ?= ../shared/containers/docker-up.sh
 
 .DEFAULT_GOAL := help
-.PHONY: help install run serve test test-fast lint format evaluate bench docker-test clean
+.PHONY: help install run serve test test-fast lint format evaluate bench docker-lint docker-test clean
 
 help:  ## list the commands
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-12s %s\n", $$1, $$2}'
@@ -44,6 +45,17 @@ evaluate: install  ## Table 2 on SHREC'11 (DATASET=...)
 
 bench: install  ## short benchmark suite (prints tables, writes results/*.json)
 	$(BIN)/python -m benchmarks.run --short
+
+docker-lint: install  ## hadolint the Dockerfile; `docker compose config -q` where compose v2 is installed
+	$(BIN)/hadolint Dockerfile && echo "Dockerfile: hadolint clean"
+	@plugin=$$(bash $(DOCKER_UP) --env 2>/dev/null | sed -n 's/^export DOCKER_CONFIG=//p'); \
+	if [ -n "$$plugin" ] && [ -x "$$plugin/cli-plugins/docker-compose" ]; then export DOCKER_CONFIG=$$plugin; fi; \
+	if docker compose version >/dev/null 2>&1; then \
+	  SHAPEBAG_ADMIN_TOKEN=$${SHAPEBAG_ADMIN_TOKEN:-lint} docker compose config -q && echo "docker-compose.yml: valid"; \
+	else echo "docker-compose.yml: NOT validated (no docker compose v2 here; $(DOCKER_UP) installs it)"; fi
+
+docker-test: install  ## the compose stack on a real engine: build, ingest, search, restart, scale
+	$(BIN)/pytest -q -m docker tests/deploy
 
 clean:  ## remove caches (keeps .venv and data)
 	rm -rf .pytest_cache .ruff_cache .mypy_cache results .cache
