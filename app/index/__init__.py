@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from app.index.approximate import ApproxL1Index
 from app.index.base import IndexFileError, ShapeIndex
 from app.index.faiss_l1 import FaissL1Index
 from app.index.numpy_l1 import NumpyL1Index
 
-BACKENDS: dict[str, type] = {"faiss": FaissL1Index, "numpy": NumpyL1Index}
-FILE_NAMES = {"faiss": "index.faiss", "numpy": "index.npz"}
+BACKENDS: dict[str, type] = {"faiss": FaissL1Index, "numpy": NumpyL1Index, "approx": ApproxL1Index}
+FILE_NAMES = {"faiss": "index.faiss", "numpy": "index.npz", "approx": "index-ivf.faiss"}
 
 
 def new_index(backend: str, dim: int) -> ShapeIndex:
@@ -23,6 +24,7 @@ def load_index(backend: str, path: Path) -> ShapeIndex:
 
 
 __all__ = [
+    "ApproxL1Index",
     "BACKENDS",
     "FILE_NAMES",
     "FaissL1Index",
