@@ -1,8 +1,8 @@
 """Describe a whole labelled folder once: worker processes fill an on-disk cache the evaluation reads.
 
 Cache layout (default .cache/describe, gitignored):
-    <root>/<sha256(DescribeParams.fingerprint())[:16]>/<file sha256>[.noise<nsr>-s<seed>].npz
-    <root>/d2-<bins>x<pairs>/<file sha256>[.noise<nsr>-s<seed>].npy
+    <root>/<sha256(DescribeParams.fingerprint() | core code hash)[:16]>/<file sha256>[.noise<nsr>-s<seed>].npz
+    <root>/d2-<bins>x<pairs>-<code hash>/<file sha256>[.noise<nsr>-s<seed>].npy
 A description depends only on the mesh bytes and the parameters, so a second run with other
 BoF settings (runs, vocabulary, hard/soft, keypoints-only) reads every description back and never
 repeats an eigen-solve. Files are written to a temporary name and renamed, so an interrupted run
@@ -52,27 +52,52 @@ class Variant:
         return "" if self.noise == 0 else f".noise{self.noise:g}-s{self.seed}"
 
 
+# the modules whose code decides a description or a D2 histogram: editing any of them (the method is
+# being tuned) must invalidate the cache, or an evaluation would silently report stale descriptions
+_DESCRIBE_CODE = ("mesh", "laplacian", "spectrum", "hks", "keypoints", "pipeline")
+_D2_CODE = ("mesh", "baselines")
+
+
+def code_fingerprint(modules: Sequence[str]) -> str:
+    """sha256 (16 hex) of the source of app/core/<module>.py for each module."""
+    core = Path(__file__).resolve().parents[1] / "core"
+    h = hashlib.sha256()
+    for name in modules:
+        h.update((core / f"{name}.py").read_bytes())
+    return h.hexdigest()[:16]
+
+
+# hashed at import, right after the core was imported: the code this process (and its forked
+# workers) runs, even if a file is edited while an evaluation is under way
+_FINGERPRINTS = {"describe": code_fingerprint(_DESCRIBE_CODE), "d2": code_fingerprint(_D2_CODE)}
+
+
 class DescriptionCache:
     def __init__(self, root: str | Path) -> None:
         self.root = Path(root)
+        self._describe_code = _FINGERPRINTS["describe"]
+        self._d2_code = _FINGERPRINTS["d2"]
 
     def description_path(self, sha: str, params: DescribeParams, variant: Variant) -> Path:
-        key = hashlib.sha256(params.fingerprint().encode()).hexdigest()[:16]
+        key = hashlib.sha256(f"{params.fingerprint()}|{self._describe_code}".encode()).hexdigest()[:16]
         return self.root / key / f"{sha}{variant.suffix()}.npz"
 
     def d2_path(self, sha: str, variant: Variant) -> Path:
-        return self.root / f"d2-{D2_BINS}x{D2_PAIRS}" / f"{sha}{variant.suffix()}.npy"
+        return self.root / f"d2-{D2_BINS}x{D2_PAIRS}-{self._d2_code}" / f"{sha}{variant.suffix()}.npy"
 
 
 @dataclass(frozen=True)
 class Task:
+    """One mesh to describe. The parent resolves the cache paths (its code fingerprint is the one
+    of the code that runs: workers are forked from it), so an edit made during a run cannot
+    scatter entries under another key."""
+
     path: str
     sha: str
     params: DescribeParams
     variant: Variant
-    cache_root: str
-    want_description: bool
-    want_d2: bool
+    description_path: str | None  # None: already cached
+    d2_path: str | None
 
 
 @dataclass
@@ -96,15 +121,14 @@ def _load_variant(path: str, sha: str, variant: Variant) -> Mesh:
 
 def run_task(task: Task) -> str | None:
     """Worker body: describe one mesh into the cache. Returns None, or an error message."""
-    cache = DescriptionCache(task.cache_root)
     try:
         mesh = _load_variant(task.path, task.sha, task.variant)
-        if task.want_description:
+        if task.description_path:
             desc = describe(mesh, task.params)
-            _atomic(cache.description_path(task.sha, task.params, task.variant), desc.save)
-        if task.want_d2:
+            _atomic(Path(task.description_path), desc.save)
+        if task.d2_path:
             hist = d2_histogram(mesh, seed=0)
-            _atomic(cache.d2_path(task.sha, task.variant), lambda p: np.save(p, hist, allow_pickle=False))
+            _atomic(Path(task.d2_path), lambda p: np.save(p, hist, allow_pickle=False))
     except (InvalidMeshError, SpectrumError, ValueError) as exc:
         return f"{task.path}: {exc}"
     return None
@@ -149,13 +173,15 @@ def describe_all(
     start = time.perf_counter()
     tasks = []
     for path, sha in files:
-        need_desc = not cache.description_path(sha, params, variant).exists()
-        need_d2 = with_d2 and not cache.d2_path(sha, variant).exists()
+        desc_path, d2_path = cache.description_path(sha, params, variant), cache.d2_path(sha, variant)
+        need_desc = not desc_path.exists()
+        need_d2 = with_d2 and not d2_path.exists()
         stats.computed += need_desc
         stats.cached += not need_desc
         stats.d2_computed += need_d2
         if need_desc or need_d2:
-            tasks.append(Task(str(path), sha, params, variant, str(cache.root), need_desc, need_d2))
+            tasks.append(Task(str(path), sha, params, variant, str(desc_path) if need_desc else None,
+                              str(d2_path) if need_d2 else None))
     label = "describe" + (f" (noise {variant.noise:g})" if variant.noise else "")
     errors: list[str] = []
     with tqdm(total=len(tasks), desc=label, unit="mesh", disable=not progress or not tasks) as bar:

@@ -193,5 +193,6 @@ def test_cache_keys_separate_parameters_variants_and_code(
     paths = {cache.description_path("ab", p, v) for p in (p1, p2) for v in (clean, noisy)}
     assert len(paths) == 4
     # an edit to the core code that computes descriptions must not reuse old entries
-    monkeypatch.setattr(evaluation_cache, "_DESCRIBE_CODE", ("mesh", "pipeline"))
+    fingerprint = evaluation_cache.code_fingerprint(("mesh", "pipeline"))
+    monkeypatch.setitem(evaluation_cache._FINGERPRINTS, "describe", fingerprint)
     assert evaluation_cache.DescriptionCache(tmp_path).description_path("ab", p1, clean) not in paths
