@@ -1,0 +1,276 @@
+// shapebag web page: search by upload, browse the collection, similar models. Vanilla JS, no build.
+"use strict";
+
+const PAGE_SIZE = 24;
+const state = { offset: 0, count: 0, label: "", status: "", labels: new Set() };
+const $ = (id) => document.getElementById(id);
+
+// ---- API ------------------------------------------------------------------------------------------
+async function api(path, options = {}) {
+  let response;
+  try {
+    response = await fetch(path, options);
+  } catch (err) {
+    throw new Error(`the service cannot be reached (${err.message})`);
+  }
+  const type = response.headers.get("content-type") || "";
+  const body = type.includes("application/json") ? await response.json() : null;
+  if (!response.ok) {
+    const message = body && body.error ? body.error.message : `${response.status} ${response.statusText}`;
+    const error = new Error(message);
+    error.status = response.status;
+    throw error;
+  }
+  return body;
+}
+
+function showError(message) {
+  $("error-text").textContent = message;
+  $("error").hidden = false;
+}
+
+function clearError() {
+  $("error").hidden = true;
+}
+
+// ---- small DOM helpers ------------------------------------------------------------------------------
+function el(tag, attrs = {}, ...children) {
+  const node = document.createElement(tag);
+  for (const [key, value] of Object.entries(attrs)) {
+    if (key === "class") node.className = value;
+    else if (key === "dataset") Object.assign(node.dataset, value);
+    else if (key.startsWith("on")) node.addEventListener(key.slice(2), value);
+    else node.setAttribute(key, value);
+  }
+  for (const child of children.flat()) {
+    if (child !== null && child !== undefined) node.append(child);
+  }
+  return node;
+}
+
+const thumbUrl = (id) => `/models/${id}/thumbnail.png`;
+const fmtSeconds = (s) => (s >= 1 ? `${s.toFixed(2)} s` : `${Math.max(1, Math.round(s * 1000))} ms`);
+const fmtBytes = (n) => (n > 1048576 ? `${(n / 1048576).toFixed(1)} MB` : `${Math.ceil(n / 1024)} KB`);
+
+function thumb(src, alt) {
+  const img = el("img", { src, alt, loading: "lazy", decoding: "async" });
+  img.addEventListener("error", () => img.classList.add("broken"));
+  return el("div", { class: "thumb" }, img);
+}
+
+function labelChip(label) {
+  return label ? el("span", { class: "chip" }, label) : el("span", { class: "chip none" }, "unlabelled");
+}
+
+// ---- results (Figure 1 layout: query card, then the ranked hits) -------------------------------------
+function renderResults(container, query, response) {
+  container.replaceChildren();
+  const seconds = response.seconds || {};
+  const timing = [];
+  if (seconds.describe !== undefined) timing.push(`described in ${fmtSeconds(seconds.describe)}`);
+  if (seconds.search !== undefined) timing.push(`searched in ${fmtSeconds(seconds.search)}`);
+  if (seconds.total !== undefined) timing.push(`total ${fmtSeconds(seconds.total)}`);
+
+  const queryCard = el("div", { class: "card query" },
+    el("div", { class: "rank q" }, "query"),
+    thumb(query.thumbnail, query.name),
+    el("div", { class: "meta" },
+      el("div", { class: "name", title: query.name }, query.name),
+      query.label !== undefined ? labelChip(query.label) : el("span", { class: "chip none" }, query.detail || ""),
+    ),
+  );
+  const hits = response.data.map((hit) => {
+    const same = query.label && hit.label === query.label;
+    return el("div", {
+      class: `card hit${same ? " same" : ""}`, dataset: { modelId: hit.model_id }, tabindex: "0",
+      title: "show models similar to this one", onclick: () => showSimilar(hit.model_id),
+    },
+      el("div", { class: "rank" }, `#${hit.rank}`),
+      thumb(thumbUrl(hit.model_id), hit.name),
+      el("div", { class: "meta" },
+        el("div", { class: "name", title: hit.name }, hit.name),
+        labelChip(hit.label),
+        el("div", { class: "distance" }, `L1 ${hit.distance.toFixed(3)}`),
+      ),
+    );
+  });
+  const heading = el("div", { class: "results-head" },
+    el("h2", {}, `Top ${response.count} for “${query.name}”`),
+    el("span", { class: "timing" }, timing.join(" · ")),
+  );
+  const body = response.count
+    ? el("div", { class: "results-row" }, queryCard, el("div", { class: "hits" }, hits))
+    : el("div", { class: "results-row" }, queryCard, el("p", { class: "empty" }, "No indexed model to compare with yet."));
+  container.append(el("section", { class: "results", id: container.id + "-section" }, heading, body));
+}
+
+// ---- search by upload ----------------------------------------------------------------------------------
+async function runSearch(file) {
+  clearError();
+  const out = $("search-results");
+  out.replaceChildren(el("div", { class: "loading" }, el("span", { class: "spinner" }), `Describing ${file.name}…`));
+  const query = { name: file.name, thumbnail: "", detail: fmtBytes(file.size) };
+
+  const form = new FormData();
+  form.append("file", file, file.name);
+  form.append("k", $("k").value);
+  const pform = new FormData();
+  pform.append("file", file, file.name);
+  const rendering = fetch("/web/preview.png", { method: "POST", body: pform })
+    .then((r) => (r.ok ? r.blob() : null)).catch(() => null);
+  try {
+    const response = await api("/search", { method: "POST", body: form });
+    const png = await rendering;
+    query.thumbnail = png ? URL.createObjectURL(png) : "";
+    renderResults(out, query, response);
+  } catch (err) {
+    out.replaceChildren();
+    showError(`Search failed: ${err.message}`);
+  }
+}
+
+function setupDropzone() {
+  const zone = $("search-form");
+  const input = $("file");
+  input.addEventListener("change", () => input.files.length && runSearch(input.files[0]));
+  zone.addEventListener("click", (event) => {
+    if (event.target.closest("select, label, option")) return;
+    input.click();
+  });
+  zone.addEventListener("keydown", (event) => {
+    if (event.key === "Enter" || event.key === " ") { event.preventDefault(); input.click(); }
+  });
+  for (const name of ["dragenter", "dragover"]) {
+    zone.addEventListener(name, (event) => { event.preventDefault(); zone.classList.add("over"); });
+  }
+  for (const name of ["dragleave", "drop"]) {
+    zone.addEventListener(name, (event) => { event.preventDefault(); zone.classList.remove("over"); });
+  }
+  zone.addEventListener("drop", (event) => {
+    const file = event.dataTransfer.files[0];
+    if (file) runSearch(file);
+  });
+}
+
+// ---- browse ---------------------------------------------------------------------------------------------
+async function loadPage() {
+  const params = new URLSearchParams({ offset: state.offset, limit: PAGE_SIZE });
+  if (state.label) params.set("label", state.label);
+  if (state.status) params.set("status", state.status);
+  const grid = $("grid");
+  try {
+    const page = await api(`/models?${params}`);
+    state.count = page.count;
+    grid.replaceChildren(...page.data.map(modelCard));
+    if (!page.data.length) grid.append(el("p", { class: "empty" }, "No models match."));
+    for (const m of page.data) if (m.label) state.labels.add(m.label);
+    updateLabelList();
+    const last = Math.min(state.offset + page.data.length, page.count);
+    $("page-info").textContent = page.count ? `${state.offset + 1}–${last} of ${page.count}` : "0 models";
+    $("prev").disabled = state.offset === 0;
+    $("next").disabled = last >= page.count;
+  } catch (err) {
+    showError(`Could not list models: ${err.message}`);
+  }
+}
+
+function modelCard(m) {
+  return el("div", {
+    class: "card model", dataset: { modelId: m.id }, tabindex: "0",
+    title: m.status === "ready" ? "show similar models" : `status: ${m.status}`,
+    onclick: () => showSimilar(m.id),
+  },
+    thumb(thumbUrl(m.id), m.name),
+    el("div", { class: "meta" },
+      el("div", { class: "name", title: m.name }, m.name),
+      el("div", { class: "row" }, labelChip(m.label),
+        m.status !== "ready" ? el("span", { class: `badge ${m.status}`, title: m.error || "" }, m.status) : null),
+    ),
+  );
+}
+
+function updateLabelList() {
+  const list = $("labels");
+  list.replaceChildren(...[...state.labels].sort().map((label) => el("option", { value: label })));
+}
+
+async function showSimilar(modelId) {
+  clearError();
+  selectTab("browse");
+  const out = $("similar-results");
+  out.replaceChildren(el("div", { class: "loading" }, el("span", { class: "spinner" }), "Searching…"));
+  try {
+    const [model, response] = await Promise.all([
+      api(`/models/${modelId}`),
+      api(`/models/${modelId}/similar?k=${$("k").value}`),
+    ]);
+    renderResults(out, { name: model.name, label: model.label, thumbnail: thumbUrl(model.id) }, response);
+    const close = el("button", { class: "button ghost", onclick: () => out.replaceChildren() }, "Close");
+    out.querySelector(".results-head").append(close);
+    out.scrollIntoView({ behavior: "smooth", block: "start" });
+  } catch (err) {
+    out.replaceChildren();
+    showError(`Similar models of #${modelId}: ${err.message}`);
+  }
+}
+
+async function loadLabels() {
+  // labels for the filter suggestions: one large page is plenty for a demo-sized collection
+  try {
+    const page = await api("/models?limit=500");
+    for (const m of page.data) if (m.label) state.labels.add(m.label);
+    updateLabelList();
+  } catch (err) { /* the grid reports errors */ }
+}
+
+// ---- tabs, status, wiring ---------------------------------------------------------------------------------
+function selectTab(name) {
+  for (const tab of document.querySelectorAll(".tab[data-tab]")) {
+    tab.classList.toggle("active", tab.dataset.tab === name);
+  }
+  $("panel-search").hidden = name !== "search";
+  $("panel-browse").hidden = name !== "browse";
+  if (name === "browse" && !$("grid").childElementCount) loadPage();
+  if (location.hash.slice(1).split("/")[0] !== name) history.replaceState(null, "", `#${name}`);
+}
+
+async function refreshStatus() {
+  const pill = $("status");
+  try {
+    const response = await fetch("/readyz");
+    const body = await response.json();
+    const n = body.checks && body.checks.indexed_models;
+    pill.textContent = body.ready ? `ready · ${n} indexed` : "not ready";
+    pill.className = `status ${body.ready ? "ok" : "warn"}`;
+    pill.title = body.ready ? "vocabulary, index, database and workers are up" : (body.checks.hint || JSON.stringify(body.checks));
+  } catch (err) {
+    pill.textContent = "offline";
+    pill.className = "status bad";
+  }
+}
+
+function init() {
+  for (const tab of document.querySelectorAll(".tab[data-tab]")) {
+    tab.addEventListener("click", () => selectTab(tab.dataset.tab));
+  }
+  $("error-close").addEventListener("click", clearError);
+  setupDropzone();
+  let typing;
+  $("label-filter").addEventListener("input", (event) => {
+    clearTimeout(typing);
+    typing = setTimeout(() => { state.label = event.target.value.trim(); state.offset = 0; loadPage(); }, 250);
+  });
+  $("status-filter").addEventListener("change", (event) => { state.status = event.target.value; state.offset = 0; loadPage(); });
+  $("prev").addEventListener("click", () => { state.offset = Math.max(0, state.offset - PAGE_SIZE); loadPage(); });
+  $("next").addEventListener("click", () => { state.offset += PAGE_SIZE; loadPage(); });
+
+  // #browse, or #similar/<id> (a shareable link to one model's neighbours)
+  const [route, arg] = location.hash.slice(1).split("/");
+  if (route === "similar" && arg) { selectTab("browse"); showSimilar(Number(arg)); }
+  else selectTab(route === "browse" ? "browse" : "search");
+  loadLabels();
+  refreshStatus();
+  setInterval(refreshStatus, 15000);
+}
+
+document.addEventListener("DOMContentLoaded", init);

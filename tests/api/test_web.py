@@ -1,0 +1,88 @@
+"""The web page's routes: the page, its assets, and the query preview (no lifespan needed)."""
+
+from __future__ import annotations
+
+import io
+import re
+
+import pytest
+import trimesh
+from fastapi import FastAPI
+from fastapi.testclient import TestClient
+from PIL import Image
+
+from app.api import errors
+from app.api.routes import web
+from app.config import Settings
+
+
+@pytest.fixture(scope="module")
+def client(tmp_path_factory: pytest.TempPathFactory) -> TestClient:
+    app = FastAPI()
+    data_dir = tmp_path_factory.mktemp("d")
+    app.state.settings = Settings(data_dir=data_dir, dev_mode=True, max_upload_bytes=200_000)
+    errors.install(app)
+    app.include_router(web.router)
+    return TestClient(app)
+
+
+def _obj(mesh: trimesh.Trimesh) -> bytes:
+    return mesh.export(file_type="obj").encode()
+
+
+def test_page_links_only_local_assets_that_exist(client: TestClient) -> None:
+    r = client.get("/")
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
+    refs = re.findall(r'(?:src|href)="([^"#]+)"', r.text)
+    assert "/static/app.js" in refs and "/static/style.css" in refs
+    for ref in refs:
+        assert not ref.startswith(("http:", "https:", "//")), f"external reference {ref}: no CDN allowed"
+        if ref.startswith("/static/"):
+            asset = client.get(ref)
+            assert asset.status_code == 200 and asset.content, ref
+    assert client.get("/static/app.js").headers["content-type"].split(";")[0] in (
+        "text/javascript", "application/javascript",
+    )
+    assert client.get("/static/style.css").headers["content-type"].startswith("text/css")
+
+
+def test_page_script_uses_the_api_contract(client: TestClient) -> None:
+    js = client.get("/static/app.js").text
+    needles = ('"/search"', "/models?", "/similar?k=", "/thumbnail.png", "body.error.message",
+               "/web/preview.png")
+    for needle in needles:
+        assert needle in js, needle
+
+
+@pytest.mark.parametrize("name", ["nope.js", "..%2Fweb.py", "..%2F..%2Fconfig.py", "%2Fetc%2Fpasswd"])
+def test_unknown_or_escaping_static_paths_are_404_json(client: TestClient, name: str) -> None:
+    r = client.get(f"/static/{name}")
+    assert r.status_code == 404
+    assert r.json()["error"]["code"] == "not_found"
+
+
+def test_preview_renders_the_uploaded_mesh(client: TestClient) -> None:
+    data = _obj(trimesh.creation.icosphere(subdivisions=2))
+    r = client.post("/web/preview.png", files={"file": ("ball.obj", data)})
+    assert r.status_code == 200 and r.headers["content-type"] == "image/png"
+    image = Image.open(io.BytesIO(r.content))
+    assert image.size == (web.PREVIEW_SIZE, web.PREVIEW_SIZE)
+    assert image.getchannel("A").getextrema() == (0, 255)  # something drawn on a transparent ground
+
+
+@pytest.mark.parametrize(
+    ("files", "status", "code"),
+    [
+        ({"file": ("junk.obj", b"this is not a mesh")}, 422, "invalid_mesh"),
+        ({"file": ("model.xyz", b"v 0 0 0")}, 422, "invalid_mesh"),
+        ({"other": ("a.obj", b"v 0 0 0")}, 422, "invalid_input"),
+        ({"file": ("big.obj", b"#" * 300_000)}, 413, "payload_too_large"),
+    ],
+)
+def test_preview_bad_uploads_get_clear_json_errors(
+    client: TestClient, files: dict, status: int, code: str
+) -> None:
+    r = client.post("/web/preview.png", files=files)
+    assert r.status_code == status, r.text
+    body = r.json()["error"]
+    assert body["code"] == code and body["message"]
