@@ -14,7 +14,7 @@ from fastapi.middleware.cors import CORSMiddleware
 
 from app.api import errors
 from app.api.deps import Runtime
-from app.api.routes import admin, health, jobs, models, search
+from app.api.routes import admin, health, jobs, models, search, web
 from app.config import Settings
 from app.services import vocabularies
 from app.services.context import ServiceContext, open_context
@@ -83,7 +83,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         )
         return response
 
-    for module in (models, jobs, search, admin, health):
+    for module in (models, jobs, search, admin, health, web):
         app.include_router(module.router)
     return app
 
