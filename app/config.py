@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from app.core.pipeline import DescribeParams
@@ -72,6 +72,11 @@ class Settings(BaseSettings):
     default_vocabulary: Path | None = SHIPPED_VOCABULARY
     describe: DescribeSettings = DescribeSettings()
     encode: EncodeSettings = EncodeSettings()
+
+    @field_validator("default_vocabulary", mode="before")
+    @classmethod
+    def _empty_is_none(cls, value: object) -> object:
+        return None if value == "" else value  # SHAPEBAG_DEFAULT_VOCABULARY= disables the shipped one
 
     def check_secure(self) -> None:
         """Refuse to start with the default admin token outside dev mode."""

@@ -72,6 +72,7 @@ def submit(
         if existing is not None:
             return Submitted(existing, None, False)
         if jobs_repo.queue_depth(conn)["queued"] >= ctx.settings.queue_limit:
+            ctx.blobs.mesh_path(digest, file_type).unlink(missing_ok=True)  # no model refers to it
             raise QueueFullError(
                 f"the ingestion queue is full ({ctx.settings.queue_limit} jobs): retry later"
             )
