@@ -49,7 +49,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             settings.describe_timeout_s,
         )
         app.state.runtime = Runtime(ctx, live, describer, workers, metrics)
-        poller = asyncio.create_task(_follow(ctx, live))
+        poller = asyncio.create_task(_follow(ctx, live, workers))
         log.info("serving data dir %s: %s", ctx.data_dir, live.status())
         try:
             yield
@@ -88,8 +88,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     return app
 
 
-async def _follow(ctx: ServiceContext, live: LiveIndex) -> None:
-    """Poll the database: new vectors/versions into the live index, periodic saves, first vocabulary."""
+async def _follow(ctx: ServiceContext, live: LiveIndex, workers: WorkerPool) -> None:
+    """Poll the database: new vectors/versions into the live index, periodic saves, first vocabulary;
+    replace embedded workers that died."""
     s = ctx.settings
     while True:
         try:
@@ -98,6 +99,7 @@ async def _follow(ctx: ServiceContext, live: LiveIndex) -> None:
                 await asyncio.to_thread(live.save)
             if live.pair is None:
                 await asyncio.to_thread(_maybe_fit_first_vocabulary, ctx)
+            workers.replace_dead()
         except asyncio.CancelledError:
             raise
         except Exception:  # keep following; the next round retries

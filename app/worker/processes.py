@@ -6,6 +6,7 @@ import logging
 import multiprocessing as mp
 import os
 import signal
+import time
 from multiprocessing.process import BaseProcess
 from multiprocessing.synchronize import Event
 
@@ -13,6 +14,7 @@ from app.config import Settings
 
 log = logging.getLogger(__name__)
 
+RESPAWN_BACKOFF_S = 5.0  # a worker that keeps dying is restarted at most this often
 THREAD_VARS = (
     "OMP_NUM_THREADS",
     "OPENBLAS_NUM_THREADS",
@@ -56,28 +58,46 @@ class WorkerPool:
         self._mp = mp.get_context("spawn")
         self._stop = self._mp.Event()
         self.processes: list[BaseProcess] = []
+        self._started_at: dict[int, float] = {}
 
     def start(self) -> None:
+        for i in range(self.count):
+            self.processes.append(self._spawn(i))
+        log.info("started %d worker processes", self.count)
+
+    def _spawn(self, slot: int) -> BaseProcess:
         saved = {v: os.environ.get(v) for v in THREAD_VARS}
         os.environ.update({v: "1" for v in THREAD_VARS})  # inherited by the spawned interpreter
         try:
-            for i in range(self.count):
-                name = f"{self.prefix}-{os.getpid()}-{i}"
-                p = self._mp.Process(
-                    target=worker_main,
-                    args=(self.settings.model_dump_json(), name, self._stop),
-                    name=name,
-                    daemon=True,
-                )
-                p.start()
-                self.processes.append(p)
+            name = f"{self.prefix}-{os.getpid()}-{slot}"
+            p = self._mp.Process(
+                target=worker_main,
+                args=(self.settings.model_dump_json(), name, self._stop),
+                name=name,
+                daemon=True,
+            )
+            p.start()
+            self._started_at[slot] = time.monotonic()
+            return p
         finally:
             for var, value in saved.items():
                 if value is None:
                     os.environ.pop(var, None)
                 else:
                     os.environ[var] = value
-        log.info("started %d worker processes", self.count)
+
+    def replace_dead(self) -> int:
+        """Start a new process for each one that died (its job comes back when its lease expires)."""
+        if self._stop.is_set():
+            return 0
+        replaced = 0
+        for i, p in enumerate(self.processes):
+            if not p.is_alive() and time.monotonic() - self._started_at.get(i, 0.0) > RESPAWN_BACKOFF_S:
+                log.warning("worker %s died (exit code %s): starting a new one", p.name, p.exitcode)
+                p.join(0)
+                self.processes[i] = self._spawn(i)
+                replaced += 1
+        return replaced
 
     def alive(self) -> int:
         return sum(p.is_alive() for p in self.processes)
