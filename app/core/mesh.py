@@ -323,14 +323,21 @@ def to_resolution(mesh: Mesh, target_vertices: int, tolerance: float = 1.5) -> M
     return out
 
 
-def simplify(mesh: Mesh, target_vertices: int) -> Mesh:
-    """Quadric decimation to about `target_vertices` vertices (f ~ 2n for a closed surface)."""
+def simplify(mesh: Mesh, target_vertices: int, max_passes: int = 3) -> Mesh:
+    """Quadric decimation to about `target_vertices` vertices (f ~ 2n for a closed surface).
+
+    With agg=3 (which keeps meshes watertight) one pass can stop well short of a large reduction
+    (160k -> 1355 instead of 1000): a further pass on the small result costs milliseconds, while an
+    eigen-solve at 1.35x the vertices costs 2.5x.
+    """
     import fast_simplification  # local: compiled extension, only needed for large meshes
 
-    reduction = 1.0 - min(1.0, target_vertices / mesh.n_vertices)
-    v, f = fast_simplification.simplify(
-        mesh.vertices.astype(np.float32), mesh.faces.astype(np.int32), target_reduction=reduction, agg=3
-    )
+    v, f = mesh.vertices.astype(np.float32), mesh.faces.astype(np.int32)
+    for _ in range(max_passes):
+        reduction = 1.0 - min(1.0, target_vertices / len(v))
+        v, f = fast_simplification.simplify(v, f, target_reduction=reduction, agg=3)
+        if len(v) <= 1.1 * target_vertices:
+            break
     out = Mesh(np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64))
     return clean(out)
 
