@@ -19,9 +19,9 @@ SHIPPED_VOCABULARY = REPO_ROOT / "data" / "vocabulary" / "default"
 class DescribeSettings(BaseModel):
     """Per-shape computation (SHAPEBAG_DESCRIBE__K=300 ...)."""
 
-    k: int = Field(300, ge=2)
-    m: int = Field(100, ge=4)
-    target_vertices: int = Field(1000, ge=0)
+    k: int = Field(default=300, ge=2)
+    m: int = Field(default=100, ge=4)
+    target_vertices: int = Field(default=1000, ge=0)
     solver: str = "auto"
 
     def params(self) -> DescribeParams:
@@ -53,7 +53,7 @@ class Settings(BaseSettings):
     host: str = "127.0.0.1"
     port: int = 8000
     workers: int = Field(default_factory=lambda: os.cpu_count() or 1, ge=0)  # embedded ingestion processes
-    search_processes: int = Field(1, ge=1)  # pool describing query meshes
+    search_processes: int = Field(default=1, ge=1)  # pool describing query meshes
     admin_token: str = DEFAULT_ADMIN_TOKEN
     dev_mode: bool = False
     cors_origins: list[str] = []  # closed by default
@@ -70,8 +70,8 @@ class Settings(BaseSettings):
     vocabulary_run: str = "run5"
     auto_vocabulary_min_models: int = 16  # with no vocabulary, fit one once this many models are ready
     default_vocabulary: Path | None = SHIPPED_VOCABULARY
-    describe: DescribeSettings = DescribeSettings()
-    encode: EncodeSettings = EncodeSettings()
+    describe: DescribeSettings = Field(default_factory=DescribeSettings)
+    encode: EncodeSettings = Field(default_factory=EncodeSettings)
 
     @field_validator("default_vocabulary", mode="before")
     @classmethod

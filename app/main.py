@@ -73,7 +73,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "POST"])
 
     @app.middleware("http")
-    async def observe_latency(request: Request, call_next):  # type: ignore[no-untyped-def]
+    async def observe_latency(request: Request, call_next):
         t = time.perf_counter()
         response = await call_next(request)
         route = request.scope.get("route")

@@ -122,6 +122,7 @@ def run_rebuild(args: argparse.Namespace) -> int:
     while True:  # help with the queue (a server's workers may take the job too) until ours finishes
         with ctx.db.read() as conn:
             job = jobs_repo.get(conn, job_id)
+        assert job is not None
         if job.state in ("done", "failed"):
             break
         if worker.run_once() is None:

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from app.index.approximate import ApproxL1Index
 from app.index.base import IndexFileError, ShapeIndex
 from app.index.faiss_l1 import FaissL1Index
 from app.index.numpy_l1 import NumpyL1Index
 
-BACKENDS: dict[str, type] = {"faiss": FaissL1Index, "numpy": NumpyL1Index, "approx": ApproxL1Index}
+BACKENDS: dict[str, Any] = {"faiss": FaissL1Index, "numpy": NumpyL1Index, "approx": ApproxL1Index}
 FILE_NAMES = {"faiss": "index.faiss", "numpy": "index.npz", "approx": "index-ivf.faiss"}
 
 

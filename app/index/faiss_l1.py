@@ -21,7 +21,7 @@ class FaissL1Index:
         return int(self._index.ntotal)
 
     def ids(self) -> np.ndarray:
-        return np.sort(faiss.vector_to_array(self._index.id_map).astype(np.int64))
+        return np.sort(faiss.vector_to_array(self._index.id_map).astype(np.int64))  # type: ignore[attr-defined]
 
     def add(self, ids: np.ndarray, vectors: np.ndarray) -> None:
         ids, vectors = as_ids(ids), as_vectors(vectors, self.dim)
@@ -48,7 +48,7 @@ class FaissL1Index:
             return np.full((len(q), k), np.inf, np.float32), np.full((len(q), k), -1, np.int64)
         params = None
         if allowed_ids is not None:
-            params = faiss.SearchParameters(sel=faiss.IDSelectorBatch(as_ids(allowed_ids)))
+            params = faiss.SearchParameters(sel=faiss.IDSelectorBatch(as_ids(allowed_ids)))  # type: ignore[call-arg]
         dist, ids = self._index.search(q, k, params=params)
         dist = np.where(ids < 0, np.inf, dist).astype(np.float32)
         return dist, ids.astype(np.int64)

@@ -102,7 +102,7 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
         model = models_repo.get(conn, job.model_id) if job.model_id is not None else None
     if model is None:
         with ctx.db.write() as conn:
-            jobs_repo.mark_done(conn, job.id, {"note": "model was deleted before ingestion"})  # type: ignore[dict-item]
+            jobs_repo.mark_done(conn, job.id, {"note": "model was deleted before ingestion"})
         return timings
     data = ctx.blobs.mesh_path(model.sha256, model.file_type).read_bytes()
     mesh = load_mesh(data, model.file_type, max_vertices=ctx.settings.max_vertices)

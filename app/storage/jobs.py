@@ -53,7 +53,7 @@ def enqueue(
         " VALUES (?, 'queued', ?, ?, ?, ?)",
         (kind, model_id, json.dumps(payload or {}), now, now),
     )
-    return int(cur.lastrowid)
+    return int(cur.lastrowid or 0)
 
 
 def get(conn: sqlite3.Connection, job_id: int) -> JobRecord | None:

@@ -50,7 +50,7 @@ def insert(
         " VALUES (?, ?, ?, ?, ?, ?, 'queued', ?, ?)",
         (name, label, json.dumps(metadata), sha256, file_type, size_bytes, now, now),
     )
-    return int(cur.lastrowid)
+    return int(cur.lastrowid or 0)
 
 
 def get(conn: sqlite3.Connection, model_id: int) -> ModelRecord | None:

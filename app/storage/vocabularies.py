@@ -48,7 +48,7 @@ def insert(
         " VALUES (?, ?, ?, ?, ?, 0, ?)",
         (path, created_at or utcnow(), trained_on, size, run, json.dumps(metadata)),
     )
-    return int(cur.lastrowid)
+    return int(cur.lastrowid or 0)
 
 
 def set_path(conn: sqlite3.Connection, vocabulary_id: int, path: str) -> None:
