@@ -9,7 +9,7 @@ import numpy as np
 
 from app.core.pipeline import ShapeDescription
 from app.services.context import ServiceContext
-from app.services.errors import InvalidInputError, NotFoundError, NotReadyError
+from app.services.errors import ConflictError, InvalidInputError, NotFoundError, NotReadyError
 from app.services.live_index import LiveIndex
 from app.storage import models as models_repo
 from app.storage import vocabularies as vocab_repo
@@ -90,7 +90,7 @@ def similar(
     if model is None:
         raise NotFoundError(f"no model with id {model_id}")
     if vector is None:
-        raise NotReadyError(f"model {model_id} is {model.status}, not yet indexed")
+        raise ConflictError(f"model {model_id} is {model.status}, not indexed: nothing to compare yet")
     allowed = _allowed(ctx, label)
     dist, ids, vid = live.search(vector, k + 1, allowed)
     keep = ids != model_id

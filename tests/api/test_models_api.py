@@ -115,4 +115,7 @@ def test_bad_uploads_get_clear_errors_and_change_nothing(data_dir, corpus, tmp_p
         r = _search(client, corpus.held_out[0][0], k=0)
         assert r.status_code == 422
         assert client.get("/models/999999/similar").status_code == 404
+        failed_id = client.get("/models", params={"status": "failed"}).json()["data"][0]["id"]
+        r = client.get(f"/models/{failed_id}/similar")
+        assert r.status_code == 409 and r.json()["error"]["code"] == "conflict"
         assert client.get("/jobs/999999").json()["error"]["code"] == "not_found"
