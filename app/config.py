@@ -56,6 +56,7 @@ class Settings(BaseSettings):
     search_processes: int = Field(default=1, ge=1)  # pool describing query meshes
     admin_token: str = DEFAULT_ADMIN_TOKEN
     dev_mode: bool = False
+    log_level: str = "INFO"  # of the worker processes
     cors_origins: list[str] = []  # closed by default
     max_upload_bytes: int = 50 * 1024 * 1024
     max_vertices: int = 2_000_000

@@ -57,7 +57,8 @@ def ingest_folder(settings, directory: Path, processes: int, wait: bool = True) 
     }
     if not wait:
         return summary
-    pool = WorkerPool(ctx.settings, max(1, processes), prefix="ingest")
+    quiet = ctx.settings.model_copy(update={"log_level": "WARNING"})  # keep the progress bars readable
+    pool = WorkerPool(quiet, max(1, processes), prefix="ingest")
     pool.start()
     try:
         with tqdm(total=len(report.job_ids), desc="describe", unit="mesh") as bar:

@@ -40,11 +40,15 @@ def worker_main(settings_json: str, name: str, stop: Event) -> None:
     """Entry point of one spawned worker process."""
     pin_threads()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent owns shutdown; Ctrl-C reaches the group
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(processName)s %(levelname)s %(message)s")
+    settings = Settings.model_validate_json(settings_json)
+    logging.basicConfig(
+        level=settings.log_level.upper(), format="%(asctime)s %(processName)s %(levelname)s %(message)s"
+    )
+    logging.getLogger("faiss").setLevel(logging.WARNING)  # its loader reports each missing SIMD build
     from app.services.context import open_context
     from app.worker.runner import Worker
 
-    ctx = open_context(Settings.model_validate_json(settings_json))
+    ctx = open_context(settings)
     Worker(ctx, name).run_forever(stop)  # type: ignore[arg-type]
 
 
