@@ -31,7 +31,7 @@ def test_served_over_http(data_dir, corpus, tmp_path):
         SHAPEBAG_WORKERS="1",
         SHAPEBAG_DESCRIBE__K="40",
         SHAPEBAG_DESCRIBE__M="20",
-        SHAPEBAG_DESCRIBE__TARGET_VERTICES="0",
+        SHAPEBAG_DESCRIBE__TARGET_VERTICES="300",
         SHAPEBAG_POLL_INTERVAL_S="0.1",
     )
     log = open(tmp_path / "server.log", "w")  # noqa: SIM115 - outlives this block (the server writes to it)

@@ -112,8 +112,8 @@ def test_bad_uploads_get_clear_errors_and_change_nothing(data_dir, corpus, tmp_p
 
         r = client.post("/search", files={"file": ("q.obj", b"v 0 0 0\n")})
         assert r.status_code == 422 and r.json()["error"]["code"] == "invalid_mesh"
-        r = _search(client, corpus.held_out[0][0], k=0)
-        assert r.status_code == 422
+        r = client.post("/search", files={"file": ("q.obj", b"v 0 0 0\n")}, data={"k": "0"})
+        assert r.status_code == 422 and "k must be" in r.json()["error"]["message"]
         assert client.get("/models/999999/similar").status_code == 404
         failed_id = client.get("/models", params={"status": "failed"}).json()["data"][0]["id"]
         r = client.get(f"/models/{failed_id}/similar")

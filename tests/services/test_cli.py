@@ -28,7 +28,7 @@ def folder(tmp_path, corpus):
 
 @pytest.fixture(autouse=True)
 def fast_describe(monkeypatch):
-    for key, value in {"K": "40", "M": "20", "TARGET_VERTICES": "0"}.items():
+    for key, value in {"K": "40", "M": "20", "TARGET_VERTICES": "300"}.items():
         monkeypatch.setenv(f"SHAPEBAG_DESCRIBE__{key}", value)
     monkeypatch.setenv("SHAPEBAG_DEFAULT_VOCABULARY", "")
 
