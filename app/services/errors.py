@@ -39,3 +39,9 @@ class ConflictError(ServiceError):
 
 class DescribeTimeoutError(ServiceError):
     code = "describe_timeout"
+
+
+class DescribeCrashedError(ServiceError):
+    """The process describing a query died (e.g. out of memory); the pool was restarted."""
+
+    code = "describe_crashed"

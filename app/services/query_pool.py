@@ -11,7 +11,7 @@ from concurrent.futures.process import BrokenProcessPool
 
 from app.core.mesh import load_mesh
 from app.core.pipeline import DescribeParams, ShapeDescription, describe
-from app.services.errors import DescribeTimeoutError
+from app.services.errors import DescribeCrashedError, DescribeTimeoutError
 from app.worker.processes import pin_threads
 
 log = logging.getLogger(__name__)
@@ -56,7 +56,9 @@ class QueryDescriber:
             ) from None
         except BrokenProcessPool:
             self._restart(pool)
-            raise
+            raise DescribeCrashedError(
+                "the process describing the query mesh stopped abruptly; it was restarted, retry"
+            ) from None
 
     def _restart(self, pool: ProcessPoolExecutor) -> None:
         if pool is not self._pool:
