@@ -112,9 +112,9 @@ def run(
             }
         )
         approx, approx_build = built["ivf"]
-        base_nprobe = _nprobe(approx)
+        base_nprobe = _nprobe(approx) if approx.approximate else 0
         for nprobe in sorted({base_nprobe, 2 * base_nprobe, 4 * base_nprobe}):
-            approx.nprobe = nprobe
+            approx.nprobe = nprobe or None
             _, got_syn = approx.search(queries, K)
             _, got_real = approx.search(real, K)
             p50, p95 = latency_ms(approx, queries)
@@ -123,7 +123,7 @@ def run(
                 {
                     "vectors": n,
                     "index": kind,
-                    "nprobe": nprobe,
+                    "nprobe": nprobe or "-",
                     "build_s": approx_build,
                     "p50_ms": p50,
                     "p95_ms": p95,

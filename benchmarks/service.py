@@ -260,6 +260,8 @@ def run(
         )
         queries = [Path(q).read_bytes() for q in qfiles]
         names = [Path(q).name for q in qfiles]
+        # warm-up, not recorded: the query pool spawns its processes (imports) on first use
+        asyncio.run(_query_load(base, queries, names, 2, 4))
         rows = []
         for clients, total in concurrency.items():
             rows.append(asyncio.run(_query_load(base, queries, names, clients, total)))
