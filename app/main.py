@@ -48,6 +48,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             settings.max_vertices,
             settings.describe_timeout_s,
         )
+        await asyncio.to_thread(metrics.skip_history, ctx)
         app.state.runtime = Runtime(ctx, live, describer, workers, metrics)
         poller = asyncio.create_task(_follow(ctx, live, workers))
         log.info("serving data dir %s: %s", ctx.data_dir, live.status())

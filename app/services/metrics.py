@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import sqlite3
+import threading
 
 from prometheus_client import CollectorRegistry, Gauge, Histogram, generate_latest
 
@@ -35,7 +37,14 @@ class Metrics:
         )
         self.models = Gauge("shapebag_models", "models by status", ["status"], registry=self.registry)
         self.indexed = Gauge("shapebag_indexed_models", "vectors in the active index", registry=self.registry)
-        self._last_job = 0
+        self._cursor = 0  # every ingest job with id <= cursor has been observed
+        self._observed: set[int] = set()  # finished jobs past the cursor already observed
+        self._lock = threading.Lock()  # scrapes may overlap
+
+    def skip_history(self, ctx: ServiceContext) -> None:
+        """Count only jobs that finish from now on (the histogram covers this process's lifetime)."""
+        with ctx.db.read() as conn:
+            self._follow_jobs(conn, observe=False)
 
     def render(self, ctx: ServiceContext, indexed: int) -> bytes:
         """Refresh the gauges from the database, then render the text exposition format."""
@@ -44,16 +53,30 @@ class Metrics:
                 self.queue_depth.labels(state).set(n)
             for status, n in models_repo.count_by_status(conn).items():
                 self.models.labels(status).set(n)
-            rows = conn.execute(  # ingest jobs finished by workers since the last scrape
-                "SELECT id, timings FROM jobs WHERE kind = 'ingest' AND state = 'done' AND id > ?"
-                " ORDER BY id",
-                (self._last_job,),
-            ).fetchall()
-        for row in rows:
-            t = json.loads(row["timings"] or "{}")
-            spent = sum(v for k, v in t.items() if k == "load" or k.startswith("describe."))
-            if spent:
-                self.describe_seconds.labels("ingest").observe(spent)
-            self._last_job = row["id"]
+            self._follow_jobs(conn, observe=True)
         self.indexed.set(indexed)
         return generate_latest(self.registry)
+
+    def _follow_jobs(self, conn: sqlite3.Connection, observe: bool) -> None:
+        """Observe the describe time of ingest jobs finished since the last call (any order)."""
+        with self._lock:
+            self._follow_jobs_locked(conn, observe)
+
+    def _follow_jobs_locked(self, conn: sqlite3.Connection, observe: bool) -> None:
+        rows = conn.execute(
+            "SELECT id, state, timings FROM jobs WHERE kind = 'ingest' AND id > ? ORDER BY id",
+            (self._cursor,),
+        ).fetchall()
+        contiguous = True
+        for row in rows:
+            finished = row["state"] in ("done", "failed")
+            if finished and row["id"] not in self._observed:
+                self._observed.add(row["id"])
+                t = json.loads(row["timings"] or "{}")
+                spent = sum(v for k, v in t.items() if k == "load" or k.startswith("describe."))
+                if observe and row["state"] == "done" and spent:
+                    self.describe_seconds.labels("ingest").observe(spent)
+            contiguous = contiguous and finished
+            if contiguous:  # every job up to here is finished: move the cursor, forget them
+                self._cursor = row["id"]
+                self._observed.discard(row["id"])

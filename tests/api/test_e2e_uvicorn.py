@@ -80,6 +80,8 @@ def test_served_over_http(data_dir, corpus, tmp_path):
                 "shapebag_describe_seconds_count",
             ):
                 assert name in metrics
+            assert 'shapebag_describe_seconds_count{where="ingest"} 1.0' in metrics
+            assert 'shapebag_describe_seconds_count{where="query"}' in metrics
             assert http.post("/admin/index/rebuild").status_code == 401
             assert (
                 http.post("/admin/index/rebuild", headers={"X-Admin-Token": "e2e-secret"}).status_code == 202
