@@ -171,7 +171,7 @@ def _bof_lines(
     options: EvaluationOptions, frozen: Vocabulary | None,
 ) -> list[RowResult]:
     params = EncodeParams(mode=options.mode, keypoints_only=options.keypoints_only)
-    meta = {"dataset_rows": row.name}
+    meta = {"row": row.name}
     t0 = time.perf_counter()
     vocab = Vocabulary.fit(db, size=options.vocabulary_size, run=row.run, seed=options.seed, metadata=meta)
     main = _score_bof(row.name, row, vocab, db, db, labels, params, t0)

@@ -132,3 +132,17 @@ def test_bad_input_is_refused() -> None:
         retrieval_scores(np.zeros((3, 3)), np.zeros(4))
     with pytest.raises(ValueError, match="non-empty"):
         ranked_scores([], LABELS6, "a")
+
+
+def test_average_precision_agrees_with_scikit_learn() -> None:
+    # an independent implementation: sklearn's AP of the scores -distance (continuous, so no ties)
+    from sklearn.metrics import average_precision_score
+
+    rng = np.random.default_rng(7)
+    labels = np.repeat(np.arange(5), 6)
+    d = rng.random((30, 30))
+    per = per_query_scores(d, labels)
+    for i in range(30):
+        others = np.arange(30) != i
+        expected = average_precision_score(labels[others] == labels[i], -d[i, others])
+        assert per["mAP"][i] == pytest.approx(expected)
