@@ -22,8 +22,15 @@ class ErrorResponse(BaseModel):
 class ModelCreate(BaseModel):
     """The multipart fields of POST /models besides `file` (documented here; read from the stream)."""
 
-    name: str | None = Field(None, description="display name; default: the file name without extension")
-    label: str | None = Field(None, description="class label, used for filtering and evaluation")
+    name: str | None = Field(
+        None,
+        min_length=1,
+        max_length=200,
+        description="display name; default: the file name without extension",
+    )
+    label: str | None = Field(
+        None, min_length=1, max_length=100, description="class label, used for filtering and evaluation"
+    )
     metadata: dict[str, Any] = Field(default_factory=dict, description="free JSON object")
 
 

@@ -98,6 +98,8 @@ def test_bad_uploads_get_clear_errors_and_change_nothing(data_dir, corpus, tmp_p
         assert r.status_code == 413 and r.json()["error"]["code"] == "payload_too_large"
         r = client.post("/models", files={"file": ("a.obj", b"v 0 0 0\n")}, data={"metadata": "[1, 2"})
         assert r.status_code == 422 and "metadata" in r.json()["error"]["message"]
+        r = client.post("/models", files={"file": ("a.obj", b"v 0 0 0\n")}, data={"label": "x" * 101})
+        assert r.status_code == 422 and r.json()["error"]["message"].startswith("label:")
         r = client.post("/models", data={"name": "no file"})
         assert r.status_code == 422
         assert client.get("/models").json()["count"] == before

@@ -8,9 +8,18 @@ from typing import Annotated
 from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, JSONResponse
+from pydantic import ValidationError
 
 from app.api.deps import CtxDep, RuntimeDep
-from app.api.schemas import ErrorResponse, ModelAccepted, ModelPublic, ModelsPublic, SearchHit, SearchResponse
+from app.api.schemas import (
+    ErrorResponse,
+    ModelAccepted,
+    ModelCreate,
+    ModelPublic,
+    ModelsPublic,
+    SearchHit,
+    SearchResponse,
+)
 from app.api.uploads import read_form
 from app.core.mesh import load_mesh
 from app.services import catalog, ingestion, search
@@ -54,15 +63,17 @@ async def upload_model(request: Request, runtime: RuntimeDep) -> JSONResponse:
     ctx = runtime.ctx
     form = await read_form(request, ctx.settings.max_upload_bytes)
     filename, data = form.file("file")
-    metadata = ingestion.parse_metadata(form.fields.get("metadata"))
+    try:
+        fields = ModelCreate(
+            name=form.fields.get("name") or None,
+            label=form.fields.get("label") or None,
+            metadata=ingestion.parse_metadata(form.fields.get("metadata")),
+        )
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        raise InvalidInputError(f"{'.'.join(map(str, first['loc']))}: {first['msg']}") from exc
     result = await run_in_threadpool(
-        ingestion.submit,
-        ctx,
-        data,
-        filename,
-        form.fields.get("name") or None,
-        form.fields.get("label") or None,
-        metadata,
+        ingestion.submit, ctx, data, filename, fields.name, fields.label, fields.metadata
     )
     body = ModelAccepted(
         model_id=result.model.id,
