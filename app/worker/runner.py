@@ -74,11 +74,12 @@ class Worker:
                 models_repo.set_failed(conn, job.model_id, reason)
 
     def _keep_lease(self, job_id: int, stop: threading.Event) -> None:
-        """Extend the lease while the job runs, so only a dead worker's job expires."""
+        """Extend the lease while the job runs, and beat the heartbeat: only a dead worker's job expires."""
         interval = max(0.5, self.ctx.settings.lease_seconds / 3)
         while not stop.wait(interval):
             try:
                 jobs_repo.extend_lease(self.ctx.db, job_id, self.name, self.ctx.settings.lease_seconds)
+                jobs_repo.heartbeat(self.ctx.db, self.name, os.getpid())
             except Exception:  # the next beat retries; a lost lease only means a duplicate run
                 log.warning("could not extend the lease of job %d", job_id)
 
