@@ -54,6 +54,7 @@ class Settings(BaseSettings):
     port: int = 8000
     workers: int = Field(default_factory=lambda: os.cpu_count() or 1, ge=0)  # embedded ingestion processes
     search_processes: int = Field(default=1, ge=1)  # pool describing query meshes
+    warm_up: bool = True  # start the query pool at startup, so the first search does not pay for it
     admin_token: str = DEFAULT_ADMIN_TOKEN
     dev_mode: bool = False
     log_level: str = "INFO"  # of the worker processes

@@ -49,6 +49,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             settings.describe_timeout_s,
         )
         await asyncio.to_thread(metrics.skip_history, ctx)
+        if settings.warm_up:  # in the background: startup does not wait for it
+            asyncio.get_running_loop().run_in_executor(None, describer.warm_up)
         app.state.runtime = Runtime(ctx, live, describer, workers, metrics)
         poller = asyncio.create_task(_follow(ctx, live, workers))
         log.info("serving data dir %s: %s", ctx.data_dir, live.status())

@@ -73,6 +73,7 @@ def make_settings(data_dir: Path, **overrides) -> Settings:
         auto_vocabulary_min_models=10**6,
         poll_interval_s=0.1,
         lease_seconds=20.0,
+        warm_up=False,
         describe_timeout_s=60.0,
     )
     base.update(overrides)

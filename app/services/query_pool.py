@@ -9,9 +9,9 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 
-from app.core.mesh import load_mesh
 from app.core.pipeline import DescribeParams, ShapeDescription, describe
 from app.services.errors import DescribeCrashedError, DescribeTimeoutError
+from app.services.mesh_policy import check_bytes, load_upload
 from app.worker.processes import pin_threads
 
 log = logging.getLogger(__name__)
@@ -22,7 +22,7 @@ def describe_bytes(
 ) -> tuple[ShapeDescription, dict[str, float]]:
     """Runs in a pool process: bytes -> description and seconds per stage (load + describe stages)."""
     t = time.perf_counter()
-    mesh = load_mesh(data, file_type, max_vertices=max_vertices)
+    mesh = load_upload(data, file_type, max_vertices)
     seconds = {"load": time.perf_counter() - t}
     description = describe(mesh, params)
     seconds.update(description.seconds)
@@ -44,20 +44,28 @@ class QueryDescriber:
 
     async def describe(self, data: bytes, file_type: str) -> tuple[ShapeDescription, dict[str, float]]:
         """Raises InvalidMeshError (from the pool process) or DescribeTimeoutError."""
+        args = (data, file_type, self.params, self.max_vertices)
+        return await self._call(describe_bytes, args, "describing the query mesh")
+
+    async def check(self, data: bytes, file_type: str) -> int:
+        """Parse and validate an upload in the pool, under the same time limit; returns its vertex count."""
+        return await self._call(check_bytes, (data, file_type, self.max_vertices), "reading the mesh")
+
+    async def _call(self, fn, args: tuple, what: str):
         loop = asyncio.get_running_loop()
         pool = self._pool
-        future = loop.run_in_executor(pool, describe_bytes, data, file_type, self.params, self.max_vertices)
+        future = loop.run_in_executor(pool, fn, *args)
         try:
             return await asyncio.wait_for(future, self.timeout_s)
         except TimeoutError:
             self._restart(pool)  # a runaway solve must not hold a pool process forever
             raise DescribeTimeoutError(
-                f"describing the query mesh took longer than {self.timeout_s:g} s; send a smaller mesh"
+                f"{what} took longer than {self.timeout_s:g} s; send a smaller mesh"
             ) from None
         except BrokenProcessPool:
             self._restart(pool)
             raise DescribeCrashedError(
-                "the process describing the query mesh stopped abruptly; it was restarted, retry"
+                f"the process {what} stopped abruptly; it was restarted, retry"
             ) from None
 
     def _restart(self, pool: ProcessPoolExecutor) -> None:
@@ -69,8 +77,11 @@ class QueryDescriber:
         pool.shutdown(wait=False, cancel_futures=True)
 
     def warm_up(self) -> None:
-        """Start the pool processes now rather than on the first query."""
-        list(self._pool.map(int, range(self.processes)))
+        """Start the pool processes now rather than on the first query (best effort)."""
+        try:
+            list(self._pool.map(int, range(self.processes)))
+        except Exception as exc:  # e.g. shut down meanwhile; the first query will start the pool
+            log.info("query pool warm-up skipped: %s", exc)
 
     def close(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
