@@ -148,6 +148,11 @@ def test_compose_stack_end_to_end(stack: Compose) -> None:
         ensure_vocabulary(client, stack, indexed=3)
         for name, _, data in shapes[:3]:
             assert_finds_itself(client, name, data, accepted[name]["model_id"], stack)
+        # the web page's files are package data: they must have made it into the installed wheel
+        page = client.get("/")
+        assert page.status_code == 200 and "<html" in page.text.lower(), page.text[:200]
+        thumb = client.get(f"/models/{accepted[shapes[0][0]]['model_id']}/thumbnail.png")
+        assert thumb.status_code == 200 and thumb.content.startswith(b"\x89PNG"), thumb.text[:200]
 
         # restart the whole stack: new containers, same named volume
         t = time.monotonic()
