@@ -34,5 +34,7 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":  # `python -m app.cli`: run the imported module's main, so that the commands'
+    from app.cli import main as _main  # CommandError (app.cli's) is the class caught, not __main__'s
+
+    sys.exit(_main())

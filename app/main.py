@@ -14,6 +14,7 @@ from fastapi.middleware.cors import CORSMiddleware
 
 from app.api import errors
 from app.api.deps import Runtime
+from app.api.limits import RefuseEncodedBodies
 from app.api.routes import admin, health, jobs, models, search, web
 from app.config import Settings
 from app.services import vocabularies
@@ -72,6 +73,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = settings
     errors.install(app)
+    app.add_middleware(RefuseEncodedBodies)  # 415 for gzip/deflate bodies: nothing is ever inflated
     if settings.cors_origins:  # closed unless configured
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "POST"])
 

@@ -24,6 +24,7 @@ STATUS: dict[type[e.ServiceError], int] = {
     e.DescribeTimeoutError: 504,
     e.DescribeCrashedError: 503,
 }
+RETRY_AFTER_S = 5
 HTTP_CODES = {401: "unauthorized", 404: "not_found", 405: "method_not_allowed", 413: "payload_too_large"}
 
 
@@ -43,6 +44,8 @@ def install(app: FastAPI) -> None:
     async def _service(request: Request, exc: e.ServiceError) -> JSONResponse:
         status = next((s for cls, s in STATUS.items() if isinstance(exc, cls)), 500)
         headers = {"WWW-Authenticate": "X-Admin-Token"} if status == 401 else None
+        if status in (429, 503):  # a full queue or a restarting pool: tell clients when to come back
+            headers = {"Retry-After": str(RETRY_AFTER_S)}
         return error_response(status, exc.code, exc.message, headers)
 
     @app.exception_handler(InvalidMeshError)

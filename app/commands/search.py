@@ -36,17 +36,18 @@ def run(args: argparse.Namespace) -> int:
 def _local(args: argparse.Namespace) -> tuple[list[dict], dict]:
     import time
 
-    from app.core.mesh import InvalidMeshError, load_mesh
+    from app.core.mesh import InvalidMeshError
     from app.core.pipeline import describe
     from app.services import search
     from app.services.context import open_context
     from app.services.errors import ServiceError
     from app.services.live_index import LiveIndex
+    from app.services.mesh_policy import load_upload
 
     ctx = open_context(settings_from(args))
     t = time.perf_counter()
     try:
-        mesh = load_mesh(args.file, max_vertices=ctx.settings.max_vertices)
+        mesh = load_upload(args.file, None, ctx.settings.max_vertices)
     except InvalidMeshError as exc:
         raise CommandError(f"{args.file}: {exc}") from exc
     description = describe(mesh, ctx.settings.describe.params())

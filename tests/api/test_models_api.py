@@ -6,6 +6,7 @@ import numpy as np
 from fastapi.testclient import TestClient
 
 from app.main import create_app
+from app.services import ingestion
 from app.storage.blobs import BlobStore
 from tests.conftest import make_settings, wait_job
 
@@ -104,12 +105,16 @@ def test_bad_uploads_get_clear_errors_and_change_nothing(data_dir, corpus, tmp_p
         assert r.status_code == 422
         assert client.get("/models").json()["count"] == before
 
-        # a file that parses as OBJ but is no surface: accepted, then its job fails at once with the reason
-        r = client.post("/models", files={"file": ("flat.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n")})
-        assert r.status_code == 202
-        job = wait_job(client, r.json()["job_id"])
+        # a file that parses as OBJ but is no surface: the API refuses it (422) and stores nothing...
+        flat = b"v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+        r = client.post("/models", files={"file": ("flat.obj", flat)})
+        assert r.status_code == 422 and r.json()["error"]["code"] == "invalid_mesh"
+        assert client.get("/models").json()["count"] == before
+        # ...and one that got in another way (bulk ingest): its job fails at once with the reason
+        sub = ingestion.submit(client.app.state.runtime.ctx, flat, "flat.obj")
+        job = wait_job(client, sub.job_id)
         assert job["state"] == "failed" and job["attempts"] == 1 and job["error"]
-        model = client.get(f"/models/{r.json()['model_id']}").json()
+        model = client.get(f"/models/{sub.model.id}").json()
         assert model["status"] == "failed" and model["error"] == job["error"]
 
         r = client.post("/search", files={"file": ("q.obj", b"v 0 0 0\n")})

@@ -10,6 +10,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, JSONResponse
 from pydantic import ValidationError
 
+from app.api import limits
 from app.api.deps import CtxDep, RuntimeDep
 from app.api.schemas import (
     ErrorResponse,
@@ -63,6 +64,7 @@ async def upload_model(request: Request, runtime: RuntimeDep) -> JSONResponse:
     ctx = runtime.ctx
     form = await read_form(request, ctx.settings.max_upload_bytes)
     filename, data = form.file("file")
+    limits.check_form(form)
     try:
         fields = ModelCreate(
             name=form.fields.get("name") or None,
@@ -72,6 +74,7 @@ async def upload_model(request: Request, runtime: RuntimeDep) -> JSONResponse:
     except ValidationError as exc:
         first = exc.errors()[0]
         raise InvalidInputError(f"{'.'.join(map(str, first['loc']))}: {first['msg']}") from exc
+    await runtime.describer.check(data, limits.upload_format(filename))  # a bad mesh: 422, nothing stored
     result = await run_in_threadpool(
         ingestion.submit, ctx, data, filename, fields.name, fields.label, fields.metadata
     )

@@ -7,6 +7,7 @@ import time
 from fastapi import APIRouter, Request
 from fastapi.concurrency import run_in_threadpool
 
+from app.api import limits
 from app.api.deps import RuntimeDep
 from app.api.routes.models import ERRORS, to_response
 from app.api.schemas import SearchResponse
@@ -47,6 +48,7 @@ async def search_mesh(request: Request, runtime: RuntimeDep) -> SearchResponse:
     t = time.perf_counter()
     form = await read_form(request, runtime.ctx.settings.max_upload_bytes)
     filename, data = form.file("file")
+    limits.check_form(form)
     try:
         k = search.check_k(int(form.fields.get("k") or 10))
     except ValueError as exc:

@@ -1,0 +1,109 @@
+"""Request limits the routes share: no compressed bodies, plain file names, printable text fields.
+
+The byte limit itself is enforced while streaming (app/api/uploads.py); geometry is checked in the
+query pool (QueryDescriber.check, app/services/mesh_policy.py). These checks are cheap and run first.
+"""
+
+from __future__ import annotations
+
+import json
+import unicodedata
+
+from app.api.uploads import UploadForm
+from app.core.mesh import InvalidMeshError, detect_format
+from app.services.errors import InvalidInputError
+
+MAX_FILENAME_CHARS = 255
+MAX_TEXT_CHARS = 200  # name; label is held to 100 by ModelCreate on /models
+TEXT_FIELDS = ("name", "label")
+# Cc: control (NUL, ESC, BEL...), Cf: format (bidi overrides, zero-width), Cs: surrogates, Co: private use
+REFUSED_CATEGORIES = {
+    "Cc": "a control character",
+    "Cf": "an invisible formatting character",
+    "Cs": "a surrogate",
+    "Co": "a private-use character",
+}
+
+
+def _odd_character(text: str) -> str | None:
+    if "\ufffd" in text:  # what the form reader puts where the bytes were not UTF-8
+        return "bytes that are not valid UTF-8"
+    for ch in text:
+        what = REFUSED_CATEGORIES.get(unicodedata.category(ch))
+        if what is not None:
+            return f"{what} (U+{ord(ch):04X})"
+    return None
+
+
+def check_filename(filename: str) -> str:
+    """The upload's file name is only used for its extension and default display name: a plain name."""
+    if len(filename) > MAX_FILENAME_CHARS:
+        raise InvalidInputError(f"the file name is longer than {MAX_FILENAME_CHARS} characters")
+    if "/" in filename or "\\" in filename or filename in (".", "..") or filename.startswith(".."):
+        raise InvalidInputError("the file name must be a plain name, not a path (no '/', '\\' or '..')")
+    odd = _odd_character(filename)
+    if odd is not None:
+        raise InvalidInputError(f"the file name contains {odd}")
+    return filename
+
+
+def upload_format(filename: str) -> str:
+    """'chair.obj' -> 'obj'; InvalidInputError (422 invalid_input) for an unsupported extension."""
+    try:
+        return detect_format(filename)
+    except InvalidMeshError as exc:
+        raise InvalidInputError(str(exc)) from exc
+
+
+def check_form(form: UploadForm, file_field: str = "file") -> None:
+    """Raise InvalidInputError (422) for a bad file name or an odd/overlong name or label."""
+    if file_field in form.files:
+        check_filename(form.files[file_field][0])
+    for name in TEXT_FIELDS:
+        value = form.fields.get(name)
+        if value is None:
+            continue
+        if len(value) > MAX_TEXT_CHARS:
+            raise InvalidInputError(f"{name}: longer than {MAX_TEXT_CHARS} characters")
+        odd = _odd_character(value)
+        if odd is not None:
+            raise InvalidInputError(f"{name}: contains {odd}")
+
+
+class RefuseEncodedBodies:
+    """ASGI middleware: 415 for a request body with a Content-Encoding (gzip, deflate...).
+
+    Nothing here inflates request bodies; refusing them before a byte is read means a compressed
+    bomb can never be inflated by a later layer either.
+    """
+
+    def __init__(self, app) -> None:
+        self.app = app
+
+    async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] == "http":
+            headers = dict(scope.get("headers") or [])
+            encoding = headers.get(b"content-encoding", b"identity").strip().lower()
+            if encoding not in (b"", b"identity"):
+                body = json.dumps(
+                    {
+                        "error": {
+                            "code": "unsupported_encoding",
+                            "message": "compressed request bodies are not accepted: send the file as is",
+                        }
+                    }
+                ).encode()
+                await send(
+                    {
+                        "type": "http.response.start",
+                        "status": 415,
+                        "headers": [
+                            (b"content-type", b"application/json"),
+                            (b"content-length", str(len(body)).encode()),
+                            (b"connection", b"close"),
+                        ],
+                    }
+                )
+                await send({"type": "http.response.body", "body": body})
+                return
+        await self.app(scope, receive, send)
