@@ -67,13 +67,15 @@ def shrec_bof(limit: int | None = None, workers: int = 2) -> tuple[np.ndarray, n
 
 
 def augment(
-    real: np.ndarray, n: int, seed: int = 0, concentration: float = 300.0, max_mix: float = 0.3
+    real: np.ndarray, n: int, seed: int = 0, concentration: float = 30.0, max_mix: float = 0.5
 ) -> np.ndarray:
     """(n, v) synthetic BoF vectors that look like real ones.
 
     Each is a histogram resampled around a real vector (Dirichlet with mean = that vector and
-    `concentration` ~ the number of vertices voting), blended with a second real vector by a
-    weight in [0, max_mix] (shapes between two known ones). Rows sum to 1, like real BoF.
+    `concentration` ~ the number of independent votes), blended with a second real vector by a
+    weight in [0, max_mix] (shapes between two known ones). Rows sum to 1, like real BoF. The
+    defaults spread the vectors widely (a pessimistic case for an IVF index: with concentration 300
+    and max_mix 0.3 every recall@10 in the search benchmark was 1.00).
     """
     rng = np.random.default_rng(seed)
     out = np.empty((n, real.shape[1]), dtype=np.float32)

@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from benchmarks.common import table, write_json
+from benchmarks.common import pin_threads, table, write_json
 
 K = 10
 
@@ -78,6 +78,7 @@ def run(
     from benchmarks.realbof import augment, shrec_bof
 
     faiss.omp_set_num_threads(1)
+    pin_threads(1)  # k-means training runs BLAS: one thread, as in a worker (see throughput.py)
     t = time.perf_counter()
     real, _ = shrec_bof(limit=real_limit)
     print(f"{len(real)} real BoF vectors ready in {time.perf_counter() - t:.1f} s", flush=True)

@@ -34,8 +34,8 @@ def nlist_for(n: int) -> int:
 
 
 def default_nprobe(nlist: int) -> int:
-    """Cells scanned per query: 1/32 of them, at least 8 (recall@10 ≥ 0.99 on real BoF vectors)."""
-    return int(min(nlist, max(8, nlist // 32)))
+    """Cells scanned per query: 1/16 of them, at least 8 (see docs/performance.md for recall@10)."""
+    return int(min(nlist, max(8, nlist // 16)))
 
 
 class ApproxL1Index:
