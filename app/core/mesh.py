@@ -148,7 +148,7 @@ def _parse_obj_triangles(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
         with warnings.catch_warnings():
             warnings.simplefilter("error", DeprecationWarning)
             faces = np.fromstring(face_text, sep=" ", dtype=np.int64)
-    except (ValueError, DeprecationWarning):
+    except (ValueError, DeprecationWarning, AttributeError):  # AttributeError: a numpy without fromstring
         return None
     if faces.size != 3 * len(f_lines) or faces.size == 0 or faces.min() < 1:
         return None
