@@ -20,7 +20,7 @@ RUN python3 -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.tom
         > /tmp/requirements.txt \
     && pip install --prefer-binary -r /tmp/requirements.txt "setuptools>=68" wheel \
     && rm /tmp/requirements.txt \
-    && find /opt/venv -depth -type d -name tests -prune -exec rm -rf {} +
+    && find /opt/venv -type d -name tests -prune -exec rm -rf {} +
 # (the libraries' own test suites are ~70 MB of the venv and never imported at runtime)
 
 # README.md* : optional (pyproject names it as the long description when present)
