@@ -2,39 +2,47 @@
 #
 # Any Debian-like image with Python >= 3.11 and venv works as the base; where no registry is reachable use
 # the locally built one:  docker build --build-arg BASE_IMAGE=localhost/debian-python:bookworm -t shapebag .
-# The base's pip settings (PIP_CERT, SSL_CERT_FILE: a proxy CA) are inherited by both stages, untouched.
+# The base's pip settings (PIP_CERT, SSL_CERT_FILE: a proxy CA) are inherited by every stage, untouched.
+#
+# Layers of the final image, slowest-changing first: base, user, the dependencies' venv (~370 MB, rebuilt only
+# when pyproject.toml changes), then the shapebag package itself (< 1 MB: all a code change rebuilds, ships
+# and pulls).
 ARG BASE_IMAGE=python:3.12-slim
 
-# ---- builder: a virtual environment with the dependencies, then the package (no deps) on top ----
-FROM ${BASE_IMAGE} AS builder
+# ---- deps: a virtual environment with the dependencies only, keyed on pyproject.toml ----
+FROM ${BASE_IMAGE} AS deps
 ENV PIP_NO_CACHE_DIR=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
     PATH=/opt/venv/bin:$PATH
 RUN python3 -m venv /opt/venv
 WORKDIR /src
-
-# Dependencies get their own layer, keyed on pyproject.toml only: a code change does not reinstall them.
-# The list is read from [project].dependencies (tomllib: Python >= 3.11) so it has one source of truth.
 COPY pyproject.toml ./
+# The list comes from [project].dependencies (tomllib: Python >= 3.11): one source of truth. The libraries'
+# own test suites (~70 MB) are never imported at runtime. The .pth puts the package directory (filled by the
+# `package` stage) on the venv's path.
 RUN python3 -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies']))" \
         > /tmp/requirements.txt \
     && pip install --prefer-binary -r /tmp/requirements.txt "setuptools>=68" wheel \
     && rm /tmp/requirements.txt \
-    && find /opt/venv -type d -name tests -prune -exec rm -rf {} +
-# (the libraries' own test suites are ~70 MB of the venv and never imported at runtime)
+    && find /opt/venv -type d -name tests -prune -exec rm -rf {} + \
+    && echo /opt/shapebag/lib > "$(python3 -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/shapebag.pth"
 
+# ---- venv: the same without pip and the build backend, which have no use at runtime ----
+FROM deps AS venv
+RUN pip uninstall -q -y setuptools wheel pip
+
+# ---- package: shapebag alone (no deps) into /opt/shapebag/lib, with its `shapebag` script ----
+FROM deps AS package
 # README.md* : optional (pyproject names it as the long description when present)
 COPY pyproject.toml README.md* ./
 COPY app/ ./app/
-# no build isolation: the build backend is already in the venv, so a code-only rebuild needs no network;
-# then the backend and pip leave the venv, they have no use at runtime
-RUN pip install --no-deps --no-build-isolation . \
-    && pip uninstall -q -y setuptools wheel pip \
+# no build isolation: the build backend is already in the venv, so a code-only rebuild needs no network
+RUN pip install --no-deps --no-build-isolation --target /opt/shapebag/lib . \
     && python3 -c "import app.cli"
 
-# ---- runtime: the venv and the shipped data only; no pip cache, no build tools, no sources ----
+# ---- runtime: base + venv + package + shipped data; no pip, no build tools, no sources, no compiler ----
 FROM ${BASE_IMAGE}
-ENV PATH=/opt/venv/bin:$PATH \
+ENV PATH=/opt/shapebag/lib/bin:/opt/venv/bin:$PATH \
     PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
     SHAPEBAG_DATA_DIR=/data \
@@ -45,7 +53,8 @@ RUN groupadd --gid 10001 shapebag \
         --shell /usr/sbin/nologin shapebag \
     && mkdir -p /data /opt/shapebag \
     && chown shapebag:shapebag /data
-COPY --from=builder /opt/venv /opt/venv
+COPY --from=venv /opt/venv /opt/venv
+COPY --from=package /opt/shapebag/lib /opt/shapebag/lib
 # The shipped default vocabulary (data/vocabulary/default, small, committed): the installed package cannot
 # find it next to app/, hence SHAPEBAG_DEFAULT_VOCABULARY. A directory source is copied by its contents
 # (data/vocabulary -> shipped/vocabulary); pyproject.toml rides along so the COPY still has a source in a
