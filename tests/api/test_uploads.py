@@ -1,0 +1,83 @@
+"""The streaming multipart reader: fields and files parsed; an oversized body refused before all is read."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+from starlette.requests import Request
+
+from app.api.uploads import MAX_FIELD_BYTES, read_form
+from app.services.errors import InvalidInputError, PayloadTooLargeError
+
+BOUNDARY = "xYzZy"
+
+
+def _body(file_bytes: bytes, **fields: str) -> bytes:
+    parts = [
+        f'--{BOUNDARY}\r\nContent-Disposition: form-data; name="{k}"\r\n\r\n{v}\r\n'.encode()
+        for k, v in fields.items()
+    ]
+    parts.append(
+        f'--{BOUNDARY}\r\nContent-Disposition: form-data; name="file"; filename="m.obj"\r\n'
+        "Content-Type: application/octet-stream\r\n\r\n".encode()
+        + file_bytes
+        + b"\r\n"
+    )
+    return b"".join(parts) + f"--{BOUNDARY}--\r\n".encode()
+
+
+def _request(body: bytes, chunk: int = 1024, headers: dict | None = None) -> tuple[Request, list[int]]:
+    """A request whose body arrives in chunks; `sent` counts the chunks the reader pulled."""
+    sent: list[int] = []
+    chunks = [body[i : i + chunk] for i in range(0, len(body), chunk)] or [b""]
+
+    async def receive():
+        i = len(sent)
+        sent.append(i)
+        return {"type": "http.request", "body": chunks[i], "more_body": i + 1 < len(chunks)}
+
+    hdrs = {"content-type": f"multipart/form-data; boundary={BOUNDARY}", **(headers or {})}
+    scope = {
+        "type": "http",
+        "method": "POST",
+        "path": "/",
+        "headers": [(k.encode(), v.encode()) for k, v in hdrs.items()],
+    }
+    return Request(scope, receive), sent
+
+
+def test_fields_and_file_are_parsed():
+    request, _ = _request(_body(b"v 0 0 0\n" * 100, name="n", label="cat"))
+    form = asyncio.run(read_form(request, max_bytes=10_000))
+    assert form.fields == {"name": "n", "label": "cat"}
+    assert form.file("file") == ("m.obj", b"v 0 0 0\n" * 100)
+    with pytest.raises(InvalidInputError):
+        form.file("other")
+
+
+def test_oversized_stream_is_refused_early_without_content_length():
+    limit = 10_000
+    body = _body(b"x" * 1_000_000)  # 100x the limit, ~1000 chunks
+    request, sent = _request(body)
+    with pytest.raises(PayloadTooLargeError):
+        asyncio.run(read_form(request, max_bytes=limit))
+    assert len(sent) * 1024 <= limit + MAX_FIELD_BYTES + 1024  # stopped at the limit, not at the end
+
+
+def test_declared_length_over_the_limit_is_refused_before_reading():
+    request, sent = _request(_body(b"x" * 100), headers={"content-length": str(10**9)})
+    with pytest.raises(PayloadTooLargeError):
+        asyncio.run(read_form(request, max_bytes=10_000))
+    assert sent == []
+
+
+def test_not_multipart_is_a_clear_error():
+    scope = {
+        "type": "http",
+        "method": "POST",
+        "path": "/",
+        "headers": [(b"content-type", b"application/json")],
+    }
+    with pytest.raises(InvalidInputError, match="multipart/form-data"):
+        asyncio.run(read_form(Request(scope), max_bytes=10))
