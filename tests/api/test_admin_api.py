@@ -114,3 +114,26 @@ def test_restart_reconciles_a_missing_or_corrupt_index(data_dir):
     with TestClient(create_app(settings)) as client:
         assert _answers(client, models) == before
     assert index_file.stat().st_size > 100  # rewritten
+
+
+def test_index_rebuild_reencodes_every_model_with_the_current_encode_settings(data_dir):
+    from app.config import EncodeSettings
+
+    settings = make_settings(data_dir, encode=EncodeSettings(mode="soft"))  # the seed was encoded "hard"
+    ctx = open_context(settings)
+    with ctx.db.read() as conn:
+        vid = vocab_repo.active(conn).id
+        _, hard, _ = vocab_repo.vectors(conn, vid)
+    with TestClient(create_app(settings)) as client:
+        models = client.get("/models", params={"limit": 100}).json()["data"]
+        before = _answers(client, models)
+        job = client.post("/admin/index/rebuild", headers=TOKEN).json()
+        done = wait_job(client, job["job_id"])
+        assert done["state"] == "done" and done["timings"]["models"] == len(models)
+        wait_for(lambda: _answers(client, models) != before, timeout_s=20)  # the live index follows
+        after = _answers(client, models)
+    assert all(hits[0][1] > 0 for hits in after)  # soft BoFs of different shapes never coincide
+    with ctx.db.read() as conn:
+        _, soft, _ = vocab_repo.vectors(conn, vid)
+    assert soft.shape == hard.shape
+    assert ((soft > 0).sum(axis=1) > (hard > 0).sum(axis=1)).all()  # soft VQ spreads weight over more words
