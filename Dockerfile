@@ -40,6 +40,15 @@ COPY app/ ./app/
 RUN pip install --no-deps --no-build-isolation --target /opt/shapebag/lib . \
     && python3 -c "import app.cli"
 
+# ---- shipped: the default vocabulary (data/vocabulary/default, small, committed), readable by everyone ----
+# The installed package cannot find it next to app/, hence SHAPEBAG_DEFAULT_VOCABULARY below. A directory
+# source is copied by its contents (data/vocabulary -> shipped/vocabulary); pyproject.toml rides along so the
+# COPY still has a source in a checkout without data/ (the service then fits a vocabulary itself once enough
+# models are ready). chmod: a vocabulary saved locally may be 0700 (written through a private temp dir).
+FROM ${BASE_IMAGE} AS shipped
+COPY pyproject.toml data* /opt/shapebag/shipped/
+RUN chmod -R a+rX,go-w /opt/shapebag/shipped
+
 # ---- runtime: base + venv + package + shipped data; no pip, no build tools, no sources, no compiler ----
 FROM ${BASE_IMAGE}
 ENV PATH=/opt/shapebag/lib/bin:/opt/venv/bin:$PATH \
@@ -55,11 +64,7 @@ RUN groupadd --gid 10001 shapebag \
     && chown shapebag:shapebag /data
 COPY --from=venv /opt/venv /opt/venv
 COPY --from=package /opt/shapebag/lib /opt/shapebag/lib
-# The shipped default vocabulary (data/vocabulary/default, small, committed): the installed package cannot
-# find it next to app/, hence SHAPEBAG_DEFAULT_VOCABULARY. A directory source is copied by its contents
-# (data/vocabulary -> shipped/vocabulary); pyproject.toml rides along so the COPY still has a source in a
-# checkout without data/ (the service then fits a vocabulary itself once enough models are ready).
-COPY pyproject.toml data* /opt/shapebag/shipped/
+COPY --from=shipped /opt/shapebag/shipped /opt/shapebag/shipped
 WORKDIR /opt/shapebag
 USER 10001:10001
 VOLUME /data
