@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import logging
 
 from fastapi import FastAPI, Request
@@ -62,6 +63,20 @@ def install(app: FastAPI) -> None:
     async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         code = HTTP_CODES.get(exc.status_code, "http_error")
         return error_response(exc.status_code, code, str(exc.detail))
+
+    @app.exception_handler(OSError)
+    async def _storage(request: Request, exc: OSError) -> JSONResponse:
+        """A full or read-only data directory is the operator's problem, said plainly; never a 500."""
+        log.error("storage error on %s %s: %s", request.method, request.url.path, exc)
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            return error_response(507, "insufficient_storage", "the server's disk is full; nothing was saved")
+        if exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM):
+            return error_response(
+                503, "storage_unavailable", "the server cannot write its data directory; nothing was saved",
+                {"Retry-After": str(RETRY_AFTER_S)},
+            )
+        log.exception("unhandled OS error")
+        return error_response(500, "internal_error", "internal error; see the server log")
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:

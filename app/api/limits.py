@@ -7,7 +7,10 @@ query pool (QueryDescriber.check, app/services/mesh_policy.py). These checks are
 from __future__ import annotations
 
 import json
+import os
+import tempfile
 import unicodedata
+from pathlib import Path
 
 from app.api.uploads import UploadForm
 from app.core.mesh import InvalidMeshError, detect_format
@@ -107,3 +110,17 @@ class RefuseEncodedBodies:
                 await send({"type": "http.response.body", "body": body})
                 return
         await self.app(scope, receive, send)
+
+
+def check_data_dir(data_dir: Path) -> None:
+    """Refuse to start (ValueError, one line) on a data directory that cannot be created or written.
+
+    A write probe rather than os.access: access() says yes to root on a read-only mount.
+    """
+    try:
+        Path(data_dir).mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".write-probe.", dir=data_dir)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise ValueError(f"cannot use the data directory {data_dir}: {exc.strerror or exc}") from None

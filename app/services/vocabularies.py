@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import shutil
 import threading
 import time
 from collections.abc import Callable
@@ -30,8 +31,17 @@ def load_vocabulary(ctx: ServiceContext, record: VocabularyRecord) -> Vocabulary
     key = (str(ctx.data_dir), record.id)
     with _cache_lock:
         if key not in _cache:
-            _cache[key] = Vocabulary.load(ctx.data_dir / record.path)
+            _cache[key] = Vocabulary.load(inside_data_dir(ctx, record.path))
         return _cache[key]
+
+
+def inside_data_dir(ctx: ServiceContext, relative: str) -> Path:
+    """data_dir / relative, refusing anything that resolves outside the data directory."""
+    root = ctx.data_dir.resolve()
+    path = (root / relative).resolve()
+    if not relative or not path.is_relative_to(root):
+        raise ValueError(f"refusing to read {relative!r}: vocabulary files live inside the data directory")
+    return path
 
 
 def register(ctx: ServiceContext, vocab: Vocabulary, activate: bool) -> int:
@@ -47,6 +57,9 @@ def register(ctx: ServiceContext, vocab: Vocabulary, activate: bool) -> int:
             created_at=vocab.metadata.get("created_at"),
         )
         directory = ctx.vocabulary_dir(vid)
+        if directory.exists():  # debris of a process killed after its save, before its commit: no row uses it
+            log.warning("removing %s, left by an interrupted vocabulary rebuild", directory)
+            shutil.rmtree(directory)
         vocab.save(directory)
         vocab_repo.set_path(conn, vid, str(directory.relative_to(ctx.data_dir)))
         if activate:

@@ -8,7 +8,6 @@ import os
 import signal
 import time
 from multiprocessing.process import BaseProcess
-from multiprocessing.synchronize import Event
 
 from app.config import Settings
 
@@ -36,7 +35,35 @@ def pin_threads() -> None:
         pass
 
 
-def worker_main(settings_json: str, name: str, stop: Event) -> None:
+class StopFlag:
+    """Shutdown flag shared with worker processes: one raw shared byte, polled (Event-like API).
+
+    Not multiprocessing.Event: its set() waits until every process sleeping in wait() has woken, and a
+    worker killed while waiting never wakes, so shutdown hung forever once any worker had died.
+    """
+
+    POLL_S = 0.05
+
+    def __init__(self, context) -> None:
+        self._flag = context.RawValue("b", 0)
+
+    def set(self) -> None:
+        self._flag.value = 1
+
+    def is_set(self) -> bool:
+        return bool(self._flag.value)
+
+    def wait(self, timeout: float | None = None) -> bool:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while not self.is_set():
+            left = self.POLL_S if deadline is None else deadline - time.monotonic()
+            if left <= 0:
+                return False
+            time.sleep(min(self.POLL_S, left))
+        return True
+
+
+def worker_main(settings_json: str, name: str, stop: StopFlag) -> None:
     """Entry point of one spawned worker process."""
     pin_threads()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent owns shutdown; Ctrl-C reaches the group
@@ -60,7 +87,7 @@ class WorkerPool:
         self.count = count
         self.prefix = prefix
         self._mp = mp.get_context("spawn")
-        self._stop = self._mp.Event()
+        self._stop = StopFlag(self._mp)
         self.processes: list[BaseProcess] = []
         self._started_at: dict[int, float] = {}
 

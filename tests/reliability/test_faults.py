@@ -1,0 +1,223 @@
+"""Faults with real processes on loopback: `shapebag serve` / `shapebag worker` killed with SIGKILL mid-work,
+then restarted; afterwards the database, blobs, vocabulary and index agree and no model is lost."""
+
+from __future__ import annotations
+
+import errno
+import subprocess
+import sys
+from pathlib import Path
+
+import httpx
+import pytest
+from fastapi.testclient import TestClient
+
+from app.core.pipeline import ShapeDescription
+from app.core.vocabulary import Vocabulary
+from app.index import load_index
+from app.main import create_app
+from app.services import vocabularies
+from app.services.context import open_context
+from app.storage import jobs as jobs_repo
+from app.storage import models as models_repo
+from app.storage import vocabularies as vocab_repo
+from app.worker.runner import Worker
+from tests.conftest import make_settings, wait_for
+from tests.reliability.helpers import MULTIPART_HEADERS, Proc, env_for, multipart, snapshot, start_server
+
+pytestmark = pytest.mark.slow
+TOKEN = {"X-Admin-Token": "reliability-secret"}
+SLOW_DESCRIBE = {
+    "SHAPEBAG_DESCRIBE__K": "300",
+    "SHAPEBAG_DESCRIBE__M": "100",
+    "SHAPEBAG_DESCRIBE__TARGET_VERTICES": "1000",
+}
+
+
+def consistent(data_dir: Path) -> dict:
+    """Offline check (no server running): every model's blobs exist and load, every ready model has a
+    BoF for the active vocabulary, the vocabulary loads, and the saved index holds exactly those ids."""
+    ctx = open_context(make_settings(data_dir))
+    with ctx.db.read() as conn:
+        models = [models_repo.get(conn, i) for (i,) in conn.execute("SELECT id FROM models").fetchall()]
+        active = vocab_repo.active(conn)
+        assert active is not None, "no active vocabulary"
+        ids, _, _ = vocab_repo.vectors(conn, active.id)
+        unfinished = jobs_repo.queue_depth(conn)
+    assert unfinished == {"queued": 0, "running": 0}, unfinished
+    ready = sorted(m.id for m in models if m.status == "ready")
+    assert [m for m in models if m.status != "ready"] == [], "a model did not make it"
+    for m in models:
+        assert ctx.blobs.mesh_path(m.sha256, m.file_type).is_file(), f"mesh of model {m.id} lost"
+        ShapeDescription.load(ctx.blobs.description_path(m.id))  # complete and readable
+    assert sorted(int(i) for i in ids) == ready
+    vocab = Vocabulary.load(vocabularies.inside_data_dir(ctx, active.path))
+    index = load_index(ctx.settings.index_backend, ctx.index_path(active.id))
+    assert index.dim == vocab.size and sorted(index.ids().tolist()) == ready
+    leftovers = [str(p) for p in data_dir.rglob(".*.tmp")]
+    return {
+        "models": len(models),
+        "vocabulary": active.id,
+        "indexed": index.count,
+        "tmp_leftovers": leftovers,
+    }
+
+
+def job_state(data_dir: Path, job_id: int) -> str:
+    ctx = open_context(make_settings(data_dir))
+    with ctx.db.read() as conn:
+        return jobs_repo.get(conn, job_id).state
+
+
+def _job(http: httpx.Client, job_id: int) -> dict:
+    return http.get(f"/jobs/{job_id}").json()
+
+
+def _upload(http: httpx.Client, path: Path, label: str | None = None) -> dict:
+    r = http.post(
+        "/models",
+        content=multipart(path.name, path.read_bytes(), {"label": label} if label else {}),
+        headers=MULTIPART_HEADERS,
+    )
+    assert r.status_code == 202, r.text
+    return r.json()
+
+
+def test_killed_worker_job_completes_after_its_lease_with_exactly_one_model(tmp_path, corpus):
+    data = tmp_path / "data"
+    server, base = start_server(
+        data, tmp_path / "server.log", SHAPEBAG_WORKERS="0", SHAPEBAG_LEASE_SECONDS="2"
+    )
+    workers: list[Proc] = []
+    try:
+        with httpx.Client(base_url=base, timeout=60) as http:
+            path, label = corpus.seeded[0]
+            job_id = _upload(http, path, label)["job_id"]
+            env = env_for(data, SHAPEBAG_LEASE_SECONDS="2", **SLOW_DESCRIBE)
+            workers.append(Proc(["worker"], env, tmp_path / "worker1.log"))
+            wait_for(lambda: _job(http, job_id)["state"] != "queued", timeout_s=120, interval_s=0.05)
+            workers[0].kill9()  # mid-describe (the slow spectrum takes seconds)
+            job = _job(http, job_id)
+            assert job["state"] == "running" and job["attempts"] == 1, job
+            workers.append(Proc(["worker"], env, tmp_path / "worker2.log"))
+            job = wait_for(
+                lambda: (j := _job(http, job_id))["state"] in ("done", "failed") and j, timeout_s=180
+            )
+            assert job["state"] == "done" and job["attempts"] == 2, job
+            models = http.get("/models").json()
+            assert models["count"] == 1 and models["data"][0]["status"] == "ready"
+    finally:
+        for w in workers:
+            w.stop()
+        server.stop()
+
+
+def test_server_killed_during_ingestion_loses_nothing(data_dir, corpus, tmp_path):
+    extra = {"SHAPEBAG_WORKERS": "1", "SHAPEBAG_LEASE_SECONDS": "2"}
+    server, base = start_server(data_dir, tmp_path / "a.log", **extra)
+    with httpx.Client(base_url=base, timeout=60) as http:
+        accepted = [_upload(http, p, label) for p, label in corpus.held_out]
+        running = lambda: any(_job(http, a["job_id"])["state"] == "running" for a in accepted[1:])  # noqa: E731
+        wait_for(running, timeout_s=120, interval_s=0.01)
+    server.kill9()  # the server, its embedded worker and its query pool, mid-ingestion
+    states = [job_state(data_dir, a["job_id"]) for a in accepted]
+    server, base = start_server(data_dir, tmp_path / "b.log", **extra)
+    try:
+        with httpx.Client(base_url=base, timeout=60) as http:
+            for a in accepted:
+                wait_for(lambda a=a: _job(http, a["job_id"])["state"] == "done", timeout_s=180)
+            total = len(corpus.seeded) + len(corpus.held_out)
+            wait_for(lambda: http.get("/readyz").json()["checks"]["indexed_models"] == total, timeout_s=30)
+    finally:
+        server.stop()  # graceful: saves the index
+    report = consistent(data_dir)
+    print(f"ingest jobs when killed: {states}; after restart: {report}")
+    assert report["models"] == report["indexed"] == len(corpus.seeded) + len(corpus.held_out)
+
+
+def test_server_killed_during_vocabulary_rebuild_recovers(data_dir, tmp_path):
+    extra = {"SHAPEBAG_WORKERS": "1", "SHAPEBAG_LEASE_SECONDS": "2"}
+    before = consistent(data_dir)
+    server, base = start_server(data_dir, tmp_path / "a.log", **extra)
+    with httpx.Client(base_url=base, timeout=60) as http:
+        wait_for(lambda: http.get("/readyz").status_code == 200, timeout_s=60)
+        r = http.post("/admin/vocabulary/rebuild", json={"size": 24, "run": "run5"}, headers=TOKEN)
+        assert r.status_code == 202, r.text
+        job_id = r.json()["job_id"]
+        wait_for(lambda: _job(http, job_id)["state"] != "queued", timeout_s=60, interval_s=0.02)
+        server.kill9()  # at once: the whole rebuild takes well under a second here
+    state_at_kill = job_state(data_dir, job_id)
+    server, base = start_server(data_dir, tmp_path / "b.log", **extra)
+    try:
+        with httpx.Client(base_url=base, timeout=60) as http:
+            job = wait_for(
+                lambda: (j := _job(http, job_id))["state"] in ("done", "failed") and j, timeout_s=120
+            )
+            assert job["state"] == "done", job
+            wait_for(lambda: http.get("/readyz").status_code == 200, timeout_s=60)
+            vocab = http.get("/admin/vocabulary", headers=TOKEN).json()
+            assert vocab["words"] == 24 and vocab["indexed_models"] == before["models"]
+    finally:
+        server.stop()
+    after = consistent(data_dir)
+    assert (
+        after["models"] == after["indexed"] == before["models"] and after["vocabulary"] > before["vocabulary"]
+    )
+    print(f"rebuild job was {state_at_kill} when killed; after restart: {after}")
+
+
+def test_rebuild_survives_a_vocabulary_directory_left_by_a_kill(data_dir):
+    """Killed after the vocabulary files were renamed into place but before the row was committed: the
+    next rebuild gets the same id (the insert was rolled back) and must not trip over the old files."""
+    ctx = open_context(make_settings(data_dir))
+    with ctx.db.read() as conn:
+        next_id = max(v.id for v in vocab_repo.all_versions(conn)) + 1
+    debris = ctx.vocabulary_dir(next_id)
+    debris.mkdir(parents=True)
+    (debris / "centers.npy").write_bytes(b"half a file")
+    with ctx.db.write() as conn:
+        job_id = jobs_repo.enqueue(conn, "rebuild_vocabulary", payload={"size": 8})
+    Worker(ctx, "after-crash").run_once()
+    with ctx.db.read() as conn:
+        assert jobs_repo.get(conn, job_id).state == "done"
+        active = vocab_repo.active(conn)
+    assert active.id == next_id and Vocabulary.load(ctx.data_dir / active.path).size == 8
+
+
+def test_unwritable_data_dir_refuses_to_start_with_one_line(tmp_path):
+    blocker = tmp_path / "not-a-directory"
+    blocker.write_text("a regular file where the data directory's parent should be")
+    env = env_for(blocker / "data")
+    p = subprocess.run(
+        [sys.executable, "-m", "app.cli", "serve", "--port", "1"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    lines = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(lines) == 1 and "cannot use the data directory" in lines[0], p.stderr
+
+
+@pytest.mark.parametrize(("code", "status"), [(errno.ENOSPC, 507), (errno.EROFS, 503)])
+def test_full_or_read_only_disk_answers_clearly_and_stores_nothing(
+    data_dir, corpus, monkeypatch, code, status
+):
+    import app.storage.blobs as blobs
+
+    path, _ = corpus.held_out[0]
+    body = multipart(path.name, path.read_bytes())
+    with TestClient(create_app(make_settings(data_dir))) as client:
+        before = snapshot(data_dir)
+
+        def no_space(fd: int) -> None:
+            raise OSError(code, "simulated")
+
+        monkeypatch.setattr(blobs.os, "fsync", no_space)  # the blob is half written when it fails
+        r = client.post("/models", content=body, headers=MULTIPART_HEADERS)
+        monkeypatch.undo()
+        assert r.status_code == status, r.text
+        assert "nothing was saved" in r.json()["error"]["message"]
+        assert status != 503 or r.headers["retry-after"]
+        assert snapshot(data_dir) == before  # no row, no blob, no temp file
+        assert client.post("/models", content=body, headers=MULTIPART_HEADERS).status_code == 202
