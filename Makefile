@@ -8,7 +8,7 @@ DATASET ?= ../shared/datasets/shrec11-simplified
 DOCKER_UP ?= ../shared/containers/docker-up.sh
 
 .DEFAULT_GOAL := help
-.PHONY: help install run serve test test-fast lint format evaluate bench docker-lint docker-test clean
+.PHONY: help install run serve test test-fast lint format evaluate vocabulary bench docker-lint docker-test clean
 
 help:  ## list the commands
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-12s %s\n", $$1, $$2}'
@@ -42,6 +42,12 @@ format: install  ## ruff format + autofix
 
 evaluate: install  ## Table 2 on SHREC'11 (DATASET=...)
 	$(BIN)/shapebag evaluate $(DATASET)
+
+vocabulary: install  ## reproduce data/vocabulary/default (synthetic corpus, 8 x 12 shapes, seed 0)
+	rm -rf var/corpus-vocab var/vocabulary-default
+	$(BIN)/python -c "from app.datasets.synthetic import generate; generate('var/corpus-vocab', classes=8, per_class=12, seed=0)"
+	$(BIN)/shapebag vocabulary fit var/corpus-vocab --out var/vocabulary-default --size 64 --run run5 --seed 0
+	@echo "compare with data/vocabulary/default, then: rm -rf data/vocabulary/default && mv var/vocabulary-default data/vocabulary/default"
 
 bench: install  ## short benchmark suite (prints tables, writes results/*.json)
 	$(BIN)/python -m benchmarks.run --short
