@@ -29,6 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-filter", action="store_true", help="keep every 2-ring HKS maximum as a keypoint")
     p.add_argument("--target-vertices", type=int, default=1000,
                    help="canonical resolution of the eigen-solve (0 keeps the input resolution)")
+    p.add_argument("--k", type=int, default=300, help="eigenpairs (default 300, the paper's)")
     p.add_argument("--vocabulary", type=Path, metavar="DIR",
                    help="also encode with this frozen vocabulary (centers.npy + vocabulary.json)")
     p.add_argument("--fit-on", choices=("all", "half"), default="all",
@@ -53,6 +54,8 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--workers must be at least 1")
     if args.target_vertices < 0:
         raise CommandError("--target-vertices must be >= 0")
+    if args.k < 2:
+        raise CommandError("--k must be at least 2")
     options = EvaluationOptions(
         rows=rows,
         vocabulary_size=args.vocabulary_size,
@@ -60,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
         keypoints_only=args.keypoints_only,
         keypoint_filter=not args.no_filter,
         target_vertices=args.target_vertices,
+        k=args.k,
         vocabulary=args.vocabulary,
         fit_on=args.fit_on,
         noise=args.noise,

@@ -45,6 +45,7 @@ class EvaluationOptions:
     keypoints_only: bool = False  # BoF over the keypoints instead of every vertex
     keypoint_filter: bool = True
     target_vertices: int = 1000
+    k: int = 300  # eigenpairs
     vocabulary: Path | None = None  # frozen vocabulary directory: adds a "frozen" line per row
     fit_on: str = "all"  # all | half: "half" adds a line with a vocabulary fit on half the classes
     noise: float = 0.0  # > 0: adds a line with noisy queries against the clean database
@@ -78,7 +79,7 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
     if unknown:
         raise EvaluationError(f"unknown row(s) {', '.join(unknown)}; choose from {', '.join(ROW_NAMES)}")
     flt = KeypointFilter(enabled=options.keypoint_filter)
-    base = DescribeParams(target_vertices=options.target_vertices, keypoint_filter=flt)
+    base = DescribeParams(k=options.k, target_vertices=options.target_vertices, keypoint_filter=flt)
     rows = []
     for name in options.rows:
         if name in RUNS:
