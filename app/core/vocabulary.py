@@ -130,6 +130,7 @@ class Vocabulary:
         directory = Path(directory)
         directory.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{directory.name}.", dir=directory.parent))
+        tmp.chmod(0o755)  # mkdtemp makes it 0700: other users (a container's service user) must read it
         np.save(tmp / "centers.npy", self.centers, allow_pickle=False)
         meta = dict(self.metadata, run=self.run, sigma=self.sigma, size=self.size)
         (tmp / "vocabulary.json").write_text(json.dumps(meta, indent=2, sort_keys=True))

@@ -87,6 +87,7 @@ def test_save_load_round_trip_without_pickle(tmp_path):
     assert np.array_equal(again.centers, vocab.centers) and again.run == "run5"
     assert again.sigma == pytest.approx(vocab.sigma)
     assert json.loads((path / "vocabulary.json").read_text())["size"] == 16
+    assert path.stat().st_mode & 0o055 == 0o055  # readable by other users (e.g. a container's service user)
     with pytest.raises(FileExistsError):
         vocab.save(tmp_path / "v1")
     # a file with pickled objects is refused by the loader
