@@ -1,0 +1,150 @@
+"""The doors: the admin token, start-up refusal, CORS, no pickle, files only from the data directory,
+upload names never used as paths, a non-root container."""
+
+from __future__ import annotations
+
+import inspect
+import re
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from app.api import deps
+from app.config import DEFAULT_ADMIN_TOKEN
+from app.main import create_app
+from app.services import vocabularies
+from app.services.context import open_context
+from app.storage import vocabularies as vocab_repo
+from tests.conftest import make_settings, wait_job
+from tests.reliability.helpers import env_for
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_admin_token_is_compared_in_constant_time_and_required(data_dir):
+    source = inspect.getsource(deps.require_admin)
+    assert "hmac.compare_digest" in source and "==" not in source
+    with TestClient(create_app(make_settings(data_dir, admin_token="s3cret-token"))) as client:
+        assert client.get("/admin/vocabulary").status_code == 401
+        for wrong in (
+            "s3cret-tokeN",
+            "s3cret-toke",
+            "s3cret-token ",
+            "",
+            "x" * 10_000,
+            "s3cret-tökén".encode(),
+        ):
+            r = client.get("/admin/vocabulary", headers={"X-Admin-Token": wrong})
+            assert r.status_code == 401 and r.headers["www-authenticate"], wrong
+        assert client.get("/admin/vocabulary", headers={"X-Admin-Token": "s3cret-token"}).status_code == 200
+        assert client.post("/admin/vocabulary/rebuild", json={"size": 8}).status_code == 401
+
+
+@pytest.mark.parametrize("token", [DEFAULT_ADMIN_TOKEN, ""])
+def test_refuses_to_start_with_a_default_or_empty_token_outside_dev_mode(tmp_path, token):
+    with pytest.raises(ValueError, match="SHAPEBAG_ADMIN_TOKEN"):
+        create_app(make_settings(tmp_path / "d", dev_mode=False, admin_token=token))
+    create_app(make_settings(tmp_path / "d", dev_mode=True, admin_token=token))  # dev mode: allowed
+
+
+def test_serve_without_a_token_exits_with_one_line(tmp_path):
+    env = env_for(tmp_path / "d")
+    env.pop("SHAPEBAG_ADMIN_TOKEN")
+    env.pop("SHAPEBAG_DEV_MODE", None)
+    p = subprocess.run(
+        [sys.executable, "-m", "app.cli", "serve", "--port", "1"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1 and "ADMIN_TOKEN" in p.stderr
+
+
+def test_cors_is_closed_by_default_and_open_only_to_configured_origins(tmp_path):
+    evil = {"Origin": "https://evil.example"}
+    preflight = {**evil, "Access-Control-Request-Method": "POST"}
+    with TestClient(create_app(make_settings(tmp_path / "a"))) as client:
+        assert "access-control-allow-origin" not in client.get("/healthz", headers=evil).headers
+        assert "access-control-allow-origin" not in client.options("/search", headers=preflight).headers
+    settings = make_settings(tmp_path / "b", cors_origins=["https://ok.example"])
+    with TestClient(create_app(settings)) as client:
+        ok = client.get("/healthz", headers={"Origin": "https://ok.example"})
+        assert ok.headers["access-control-allow-origin"] == "https://ok.example"
+        assert "access-control-allow-origin" not in client.get("/healthz", headers=evil).headers
+
+
+def test_no_pickle_anywhere_in_the_package():
+    pattern = re.compile(
+        r"\bimport (c?pickle|dill|shelve|marshal)\b|\bpickle\.|allow_pickle\s*=\s*True|joblib\.load"
+    )
+    found = [
+        f"{p.relative_to(REPO)}:{i}: {line.strip()}"
+        for p in sorted((REPO / "app").rglob("*.py"))
+        for i, line in enumerate(p.read_text().splitlines(), 1)
+        if pattern.search(line)
+    ]
+    assert found == []
+    np_loads = [
+        f"{p.relative_to(REPO)}:{i}"
+        for p in sorted((REPO / "app").rglob("*.py"))
+        for i, line in enumerate(p.read_text().splitlines(), 1)
+        if "np.load(" in line and "allow_pickle=False" not in line
+    ]
+    assert np_loads == [], "every np.load says allow_pickle=False"
+
+
+def test_vocabulary_and_index_files_are_read_only_from_the_data_dir(data_dir, tmp_path):
+    ctx = open_context(make_settings(data_dir))
+    with ctx.db.read() as conn:
+        record = vocab_repo.active(conn)
+    assert ctx.index_path(record.id).resolve().is_relative_to(data_dir.resolve())
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    for path in ("../elsewhere", str(outside), "vocabularies/../../elsewhere", ""):
+        with pytest.raises(ValueError, match="inside the data directory"):
+            vocabularies.inside_data_dir(ctx, path)
+    # a tampered row pointing outside is refused when loaded
+    conn = sqlite3.connect(data_dir / "shapebag.db")
+    conn.execute("UPDATE vocabularies SET path = ? WHERE id = ?", (str(outside), record.id))
+    conn.commit()
+    conn.close()
+    vocabularies._cache.clear()
+    with ctx.db.read() as conn:
+        tampered = vocab_repo.get(conn, record.id)
+    assert tampered.path == str(outside)
+    with pytest.raises(ValueError, match="inside the data directory"):
+        vocabularies.load_vocabulary(ctx, tampered)
+
+
+def test_upload_names_are_never_used_as_paths(data_dir, corpus, tmp_path):
+    path, _ = corpus.held_out[0]
+    with TestClient(create_app(make_settings(data_dir))) as client:
+        r = client.post(
+            "/models",
+            files={"file": ("evil.obj", path.read_bytes())},
+            data={"name": "../../../../tmp/evil-name", "label": "../../etc"},
+        )
+        assert r.status_code == 202
+        assert wait_job(client, r.json()["job_id"])["state"] == "done"
+        model = client.get(f"/models/{r.json()['model_id']}").json()
+        assert model["name"] == "../../../../tmp/evil-name"  # stored as text, shown as text
+        assert client.get(f"/models/{model['id']}/thumbnail.png").status_code == 200
+    names = [p.name for p in data_dir.rglob("*") if p.is_file()]
+    assert not any("evil" in n or n == "etc" for n in names)
+    blob_names = {p.name for p in (data_dir / "meshes").rglob("*.*")}
+    assert f"{model['sha256']}.obj" in blob_names
+    assert all(re.fullmatch(r"[0-9a-f]{64}\.(obj|off|ply|stl|glb)", n) for n in blob_names)
+
+
+def test_container_runs_as_non_root():
+    lines = [ln.strip() for ln in (REPO / "Dockerfile").read_text().splitlines()]
+    final_stage = lines[max(i for i, ln in enumerate(lines) if ln.upper().startswith("FROM ")) :]
+    users = [ln.split(None, 1)[1] for ln in final_stage if ln.upper().startswith("USER ")]
+    assert users, "the runtime stage has no USER line"
+    user = users[-1].split(":")[0]
+    assert user not in ("0", "root")

@@ -1,0 +1,31 @@
+"""Bounded load on loopback: 50 concurrent clients, searches and uploads mixed, no errors.
+
+The default run lasts 12 s; `python -m benchmarks.load` runs the full 60 s and prints the same figures."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+from benchmarks.load import Meshes, drive, report
+from tests.reliability.helpers import start_server
+
+pytestmark = pytest.mark.slow
+SECONDS = 12.0
+
+
+def test_fifty_clients_mixed_load_without_errors(data_dir, corpus, tmp_path):
+    server, base = start_server(
+        data_dir, tmp_path / "s.log", SHAPEBAG_WORKERS="1", SHAPEBAG_QUEUE_LIMIT="100000"
+    )
+    try:
+        meshes = Meshes([p for p, _ in corpus.files])
+        result = asyncio.run(drive(base, meshes, clients=50, seconds=SECONDS, upload_share=0.2))
+    finally:
+        server.stop()
+    print("\n" + report(result))
+    assert result["errors"] == 0, result["error_samples"]
+    assert result["search"]["requests"] >= 10 and result["upload"]["requests"] >= 3
+    # bounded: every request answered, none anywhere near the client timeout
+    assert result["search"]["max_s"] < 120 and result["upload"]["max_s"] < 120
