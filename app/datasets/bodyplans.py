@@ -33,11 +33,19 @@ class Chain:
     hinge: tuple[float, float, float] | None = None
 
 
-def _limb(anchor, direction, lengths, radii, bend, hinge=None) -> Chain:
+Vec = tuple[float, float, float]
+
+
+def _limb(
+    anchor: Vec,
+    direction: Vec,
+    lengths: tuple[float, ...],
+    radii: tuple[tuple[float, float], ...],
+    bend: tuple[float, ...],
+    hinge: Vec | None = None,
+) -> Chain:
     """A chain whose segments all start in the same rest direction."""
-    n = len(lengths)
-    return Chain(tuple(anchor), (tuple(direction),) * n, tuple(lengths), tuple(radii), tuple(bend),
-                 None if hinge is None else tuple(hinge))
+    return Chain(anchor, (direction,) * len(lengths), lengths, radii, bend, hinge)
 
 
 def quadruped() -> list[Chain]:
