@@ -2,7 +2,7 @@
 "use strict";
 
 const PAGE_SIZE = 24;
-const state = { offset: 0, count: 0, label: "", status: "", labels: new Set() };
+const state = { offset: 0, count: 0, label: "", status: "", labels: new Set(), ticket: 0 };
 const $ = (id) => document.getElementById(id);
 
 // ---- API ------------------------------------------------------------------------------------------
@@ -52,8 +52,9 @@ const thumbUrl = (id) => `/models/${id}/thumbnail.png`;
 const fmtSeconds = (s) => (s >= 1 ? `${s.toFixed(2)} s` : `${Math.max(1, Math.round(s * 1000))} ms`);
 const fmtBytes = (n) => (n > 1048576 ? `${(n / 1048576).toFixed(1)} MB` : `${Math.ceil(n / 1024)} KB`);
 
-function thumb(src, alt) {
-  const img = el("img", { src, alt, loading: "lazy", decoding: "async" });
+function thumb(src, alt, lazy = false) {
+  // lazy only in the long browse grid: ranked results are few and should all show at once
+  const img = el("img", lazy ? { src, alt, loading: "lazy", decoding: "async" } : { src, alt, decoding: "async" });
   img.addEventListener("error", () => img.classList.add("broken"));
   return el("div", { class: "thumb" }, img);
 }
@@ -123,6 +124,7 @@ async function runSearch(file) {
     const png = await rendering;
     query.thumbnail = png ? URL.createObjectURL(png) : "";
     renderResults(out, query, response);
+    $("search-form").classList.add("compact");
   } catch (err) {
     out.replaceChildren();
     showError(`Search failed: ${err.message}`);
@@ -158,8 +160,10 @@ async function loadPage() {
   if (state.label) params.set("label", state.label);
   if (state.status) params.set("status", state.status);
   const grid = $("grid");
+  const ticket = ++state.ticket;  // a slower, older answer must not overwrite a newer one
   try {
     const page = await api(`/models?${params}`);
+    if (ticket !== state.ticket) return;
     state.count = page.count;
     grid.replaceChildren(...page.data.map(modelCard));
     if (!page.data.length) grid.append(el("p", { class: "empty" }, "No models match."));
@@ -180,7 +184,7 @@ function modelCard(m) {
     title: m.status === "ready" ? "show similar models" : `status: ${m.status}`,
     onclick: () => showSimilar(m.id),
   },
-    thumb(thumbUrl(m.id), m.name),
+    thumb(thumbUrl(m.id), m.name, true),
     el("div", { class: "meta" },
       el("div", { class: "name", title: m.name }, m.name),
       el("div", { class: "row" }, labelChip(m.label),
