@@ -11,6 +11,9 @@ import os
 import tempfile
 import unicodedata
 from pathlib import Path
+from typing import Annotated
+
+from fastapi import Path as PathParam
 
 from app.api.uploads import UploadForm
 from app.core.mesh import InvalidMeshError, detect_format
@@ -124,3 +127,7 @@ def check_data_dir(data_dir: Path) -> None:
         os.unlink(probe)
     except OSError as exc:
         raise ValueError(f"cannot use the data directory {data_dir}: {exc.strerror or exc}") from None
+
+
+# ids are SQLite INTEGERs: a larger number is a 422 from validation, not an OverflowError (500) in the driver
+IdPath = Annotated[int, PathParam(ge=1, le=2**63 - 1, description="a model or job id")]

@@ -12,6 +12,7 @@ from pydantic import ValidationError
 
 from app.api import limits
 from app.api.deps import CtxDep, RuntimeDep
+from app.api.limits import IdPath
 from app.api.schemas import (
     ErrorResponse,
     ModelAccepted,
@@ -101,12 +102,12 @@ def list_models(
 
 
 @router.get("/{model_id}", response_model=ModelPublic, responses=ERRORS)
-def get_model(model_id: int, ctx: CtxDep) -> ModelPublic:
+def get_model(model_id: IdPath, ctx: CtxDep) -> ModelPublic:
     return ModelPublic.of(ingestion.get_model(ctx, model_id))
 
 
 @router.get("/{model_id}/mesh", responses=ERRORS, response_class=FileResponse)
-def get_mesh(model_id: int, ctx: CtxDep) -> FileResponse:
+def get_mesh(model_id: IdPath, ctx: CtxDep) -> FileResponse:
     model = ingestion.get_model(ctx, model_id)
     path = ctx.blobs.mesh_path(model.sha256, model.file_type)
     media = mimetypes.guess_type(f"x.{model.file_type}")[0] or "application/octet-stream"
@@ -114,7 +115,7 @@ def get_mesh(model_id: int, ctx: CtxDep) -> FileResponse:
 
 
 @router.delete("/{model_id}", status_code=status.HTTP_204_NO_CONTENT, responses=ERRORS)
-def delete_model(model_id: int, runtime: RuntimeDep) -> Response:
+def delete_model(model_id: IdPath, runtime: RuntimeDep) -> Response:
     """Gone from the index, the database and the blob store."""
     catalog.delete_model(runtime.ctx, runtime.live, model_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
@@ -122,7 +123,7 @@ def delete_model(model_id: int, runtime: RuntimeDep) -> Response:
 
 @router.get("/{model_id}/similar", response_model=SearchResponse, responses=ERRORS)
 def similar(
-    model_id: int,
+    model_id: IdPath,
     runtime: RuntimeDep,
     k: Annotated[int, Query(ge=1, le=search.MAX_K)] = 10,
     label: str | None = None,
@@ -132,7 +133,7 @@ def similar(
 
 
 @router.get("/{model_id}/thumbnail.png", responses=ERRORS, response_class=Response)
-def thumbnail(model_id: int, ctx: CtxDep, size: Annotated[int, Query(ge=32, le=1024)] = 256) -> Response:
+def thumbnail(model_id: IdPath, ctx: CtxDep, size: Annotated[int, Query(ge=32, le=1024)] = 256) -> Response:
     """A server-side rendering of the stored mesh (cached under the data directory)."""
     model = ingestion.get_model(ctx, model_id)
     path = ctx.blobs.thumbnail_path(model.id, size)
