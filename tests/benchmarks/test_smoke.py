@@ -80,7 +80,9 @@ def test_search_benchmark_reports_recall(tmp_path, capsys):
 def test_quality_and_throughput_benchmarks_run(tmp_path, capsys):
     assert quality.main(["--tiny"]) == 0
     doc = _json(tmp_path, "quality-tiny")
-    assert [r["pipeline"] for r in doc["rows"]] == ["ours", "plain"]
+    assert [(r["pipeline"], r["encoding"]) for r in doc["rows"]] == [
+        (p, e) for p in ("ours", "plain") for e in ("default", "area-weighted")
+    ]
     assert all(0.0 <= r["mAP"] <= 1.0 for r in doc["rows"])
     assert throughput.main(["--tiny"]) == 0
     rows = _json(tmp_path, "throughput-tiny")["rows"]
