@@ -172,7 +172,12 @@ def main(argv: list[str] | None = None) -> int:
         run((800,), plain_max=800, repeats=1, name="describe-tiny", vocab_meshes=2)
         return 0
     sizes = tuple(int(s) for s in args.sizes.split(",")) if args.sizes else FULL_SIZES
-    run(sizes, plain_max=10000 if args.short else max(sizes), repeats=args.repeats)
+    run(
+        sizes,
+        plain_max=10000 if args.short else max(sizes),
+        repeats=args.repeats,
+        name="describe-short" if args.short else "describe",
+    )
     return 0
 
 

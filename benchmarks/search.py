@@ -164,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     sizes = (10_000, 100_000) if args.short else (10_000, 100_000, 1_000_000)
     if args.sizes:
         sizes = tuple(int(float(s)) for s in args.sizes.split(","))
-    run(sizes)
+    run(sizes, name="search-short" if args.short else "search")
     return 0
 
 

@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.tiny:
         run(2, vertices=1000, name="throughput-tiny")
     else:
-        run(10 if args.short else args.meshes)
+        run(10 if args.short else args.meshes, name="throughput-short" if args.short else "throughput")
     return 0
 
 
