@@ -57,7 +57,7 @@ UPLOAD_BODY = {
     "",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=ModelAccepted,
-    responses=ERRORS,
+    responses={**ERRORS, **{c: ERRORS[422] for c in (415, 504, 507)}},  # compressed body, time limit, disk
     openapi_extra=UPLOAD_BODY,
 )
 async def upload_model(request: Request, runtime: RuntimeDep) -> JSONResponse:

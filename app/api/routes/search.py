@@ -41,7 +41,7 @@ SEARCH_BODY = {
 @router.post(
     "/search",
     response_model=SearchResponse,
-    responses={**ERRORS, 504: ERRORS[422]},
+    responses={**ERRORS, 415: ERRORS[422], 504: ERRORS[422]},
     openapi_extra=SEARCH_BODY,
 )
 async def search_mesh(request: Request, runtime: RuntimeDep) -> SearchResponse:
