@@ -46,6 +46,7 @@ def real_only_recall(real: np.ndarray) -> list[dict]:
     flat, approx = FaissL1Index(real.shape[1]), ApproxL1Index(real.shape[1], train_at=1)
     flat.add(ids, real)
     approx.add(ids, real)
+    approx.wait_for_training()
     _, want = flat.search(real, K)
     rows = []
     for nprobe in (None, 16, 32):
@@ -94,6 +95,8 @@ def run(
             t = time.perf_counter()
             for s in range(0, n, 100_000):  # add in batches, as an ingestion backlog would
                 index.add(ids[s : s + 100_000], base[s : s + 100_000])
+            if isinstance(index, ApproxL1Index):
+                index.wait_for_training()  # the IVF builds in a background thread
             built[label] = (index, time.perf_counter() - t)
         flat, flat_build = built["flat"]
         _, want_syn = flat.search(queries, K)

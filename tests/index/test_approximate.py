@@ -31,7 +31,8 @@ def trained() -> tuple[ApproxL1Index, np.ndarray, np.ndarray]:
     index.add(ids[:999], base[:999])
     assert not index.approximate
     index.add(ids[999:], base[999:])
-    assert index.approximate and index.count == 4000
+    index.wait_for_training()
+    assert index.approximate and index.count == 4000 and not index.training
     return index, ids, base
 
 
@@ -81,6 +82,56 @@ def test_trained_index_round_trips(trained, tmp_path):
     for a, b in zip(loaded.search(base[:20], 5), index.search(base[:20], 5), strict=True):
         np.testing.assert_array_equal(a, b)
     assert loaded.remove(loaded.ids()[:3]) == 3
+
+
+def test_training_runs_to_the_side_and_replays_what_happened_meanwhile(monkeypatch):
+    import threading
+
+    from app.index import approximate
+
+    release = threading.Event()
+    real_build = approximate._build_ivf
+
+    def slow_build(*args):
+        release.wait(30)  # hold the build until the adds and removes below have happened
+        return real_build(*args)
+
+    monkeypatch.setattr(approximate, "_build_ivf", slow_build)
+    ids, base = _clustered(3000)
+    index = ApproxL1Index(DIM, train_at=1000)
+    index.add(ids[:2000], base[:2000])  # crosses train_at: the build starts and waits
+    assert index.training and not index.approximate
+    index.add(ids[2000:], base[2000:])  # served and logged while the build runs
+    assert index.remove(ids[:100]) == 100
+    index.add(ids[200:201], base[0:1])  # a replacement, logged too
+    _, got = index.search(base[500:505], 1)  # the flat index answers meanwhile, exactly
+    np.testing.assert_array_equal(got[:, 0], ids[500:505])
+    release.set()
+    index.wait_for_training()
+    assert index.approximate and not index.training and index.count == 2900
+    np.testing.assert_array_equal(index.ids(), np.sort(ids[100:]))
+    index.nprobe = index._index.nlist
+    keep, vectors = ids[100:], base[100:].copy()
+    vectors[100] = base[0]  # id ids[200] now holds base[0]
+    _, got = index.search(base[:50], 10)
+    np.testing.assert_array_equal(got, _exact(keep, vectors, base[:50], 10))
+
+
+def test_a_failed_build_is_reported_and_the_index_keeps_serving(monkeypatch):
+    from app.index import approximate
+
+    def broken(*args):
+        raise RuntimeError("k-means exploded")
+
+    monkeypatch.setattr(approximate, "_build_ivf", broken)
+    ids, base = _clustered(1200)
+    index = ApproxL1Index(DIM, train_at=1000)
+    index.add(ids, base)
+    with pytest.raises(RuntimeError, match="exploded"):
+        index.wait_for_training()
+    assert not index.approximate and index.count == 1200
+    _, got = index.search(base[:3], 1)
+    np.testing.assert_array_equal(got[:, 0], ids[:3])
 
 
 def test_load_refuses_an_index_of_another_metric(tmp_path):
