@@ -16,8 +16,9 @@ from fastapi.responses import FileResponse
 
 from app.api.deps import SettingsDep
 from app.api.uploads import read_form
-from app.core.mesh import detect_format, load_mesh, simplify
+from app.core.mesh import detect_format, simplify
 from app.services.errors import NotFoundError
+from app.services.mesh_policy import load_upload
 from app.services.thumbnails import render_png
 
 router = APIRouter(tags=["web"])
@@ -52,7 +53,7 @@ async def preview(request: Request, settings: SettingsDep) -> Response:
 
 
 def _render(data: bytes, file_type: str, max_vertices: int) -> bytes:
-    mesh = load_mesh(data, file_type, max_vertices=max_vertices)  # InvalidMeshError -> 422
+    mesh = load_upload(data, file_type, max_vertices)  # InvalidMeshError -> 422 (what an upload would get)
     if mesh.n_vertices > PREVIEW_MAX_VERTICES:
         mesh = simplify(mesh, PREVIEW_MAX_VERTICES)
     return render_png(mesh.vertices, mesh.faces, PREVIEW_SIZE)
