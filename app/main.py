@@ -22,6 +22,7 @@ from app.services.context import ServiceContext, open_context
 from app.services.live_index import LiveIndex
 from app.services.metrics import Metrics
 from app.services.query_pool import QueryDescriber
+from app.services.sweep import sweep_temp_files
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
 from app.storage import vocabularies as vocab_repo
@@ -39,6 +40,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         ctx = await asyncio.to_thread(open_context, settings)
+        await asyncio.to_thread(sweep_temp_files, ctx.data_dir)  # debris of writes cut short by a crash
         await asyncio.to_thread(vocabularies.ensure_default, ctx)
         live = LiveIndex(ctx)
         await asyncio.to_thread(live.refresh)

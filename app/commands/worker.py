@@ -6,6 +6,7 @@ import argparse
 import signal
 import threading
 
+from app.cli import CommandError
 from app.commands._common import add_data_dir, settings_from, setup_logging
 
 
@@ -29,7 +30,12 @@ def run(args: argparse.Namespace) -> int:
 
         stop = threading.Event()
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
-        worker = Worker(open_context(settings))
+        try:
+            ctx = open_context(settings)
+        except OSError as exc:  # one line, like `shapebag serve`, not a traceback
+            why = exc.strerror or exc
+            raise CommandError(f"cannot use the data directory {settings.data_dir}: {why}") from exc
+        worker = Worker(ctx)
         print(f"shapebag worker {worker.name}: {settings.data_dir}")
         try:
             n = worker.run_forever(stop, exit_when_idle=args.exit_when_idle)

@@ -4,8 +4,10 @@ then restarted; afterwards the database, blobs, vocabulary and index agree and n
 from __future__ import annotations
 
 import errno
+import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import httpx
@@ -221,3 +223,37 @@ def test_full_or_read_only_disk_answers_clearly_and_stores_nothing(
         assert status != 503 or r.headers["retry-after"]
         assert snapshot(data_dir) == before  # no row, no blob, no temp file
         assert client.post("/models", content=body, headers=MULTIPART_HEADERS).status_code == 202
+
+
+def test_old_temp_debris_is_swept_at_start_and_fresh_temp_files_are_left(data_dir):
+    old_file = data_dir / "descriptions" / ".14.npz.2tet26mm.tmp"
+    old_dir = data_dir / "vocabularies" / ".7.k3_x9q2"
+    fresh = data_dir / "meshes" / ".abc.obj.q1w2e3.tmp"  # maybe another process writing right now
+    for p in (old_file, fresh):
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_bytes(b"half a file")
+    old_dir.mkdir()
+    (old_dir / "centers.npy").write_bytes(b"half")
+    long_ago = time.time() - 2 * 3600
+    for p in (old_file, old_dir):
+        os.utime(p, (long_ago, long_ago))
+    kept = snapshot(data_dir).files
+    with TestClient(create_app(make_settings(data_dir))) as client:
+        assert client.get("/healthz").status_code == 200
+    assert not old_file.exists() and not old_dir.exists() and fresh.exists()
+    assert all((data_dir / rel).exists() for rel in kept if ".tmp" not in rel and ".7." not in rel)
+
+
+def test_worker_on_an_unwritable_data_dir_exits_with_a_clear_error(tmp_path):
+    blocker = tmp_path / "not-a-directory"
+    blocker.write_text("a regular file")
+    p = subprocess.run(
+        [sys.executable, "-m", "app.cli", "worker", "--exit-when-idle"],
+        env=env_for(blocker / "data"),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    last = p.stderr.strip().splitlines()[-1]
+    assert p.returncode == 2, p.stderr
+    assert last.startswith("shapebag worker: error: cannot use the data directory"), p.stderr
