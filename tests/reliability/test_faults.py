@@ -157,8 +157,10 @@ def test_server_killed_during_vocabulary_rebuild_recovers(data_dir, tmp_path):
             )
             assert job["state"] == "done", job
             wait_for(lambda: http.get("/readyz").status_code == 200, timeout_s=60)
-            vocab = http.get("/admin/vocabulary", headers=TOKEN).json()
-            assert vocab["words"] == 24 and vocab["indexed_models"] == before["models"]
+            vocab = lambda: http.get("/admin/vocabulary", headers=TOKEN).json()  # noqa: E731
+            # the live index follows the swap on its next poll
+            wait_for(lambda: vocab()["indexed_models"] == before["models"], timeout_s=30)
+            assert vocab()["words"] == 24
     finally:
         server.stop()
     after = consistent(data_dir)
