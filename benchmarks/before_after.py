@@ -30,8 +30,10 @@ def _old_module(rev: str, directory: Path):
     path = directory / "mesh_before.py"
     path.write_text(source)
     spec = importlib.util.spec_from_file_location("mesh_before", path)
+    if spec is None or spec.loader is None:
+        raise RuntimeError(f"cannot import {path}")
     module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    spec.loader.exec_module(module)
     return module
 
 

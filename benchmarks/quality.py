@@ -19,6 +19,7 @@ import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -87,7 +88,8 @@ def run(classes: int, per_class: int, vertices: int = 4000, workers: int = 2, na
     key = hashlib.sha256(f"{_code_key(files)}-{vertices}".encode()).hexdigest()[:16]
     cache = CACHE / f"quality-{key}"
     cache.mkdir(parents=True, exist_ok=True)
-    rows, detail = [], {}
+    rows: list[dict[str, Any]] = []
+    detail: dict[str, dict] = {}
     for mode in ("ours", "plain"):
         jobs = [
             (str(p), vertices, mode, str(cache / f"{i:04d}-{mode}.npz")) for i, (p, _) in enumerate(files)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from typing import Any
 
 import numpy as np
 
@@ -90,7 +91,7 @@ def run(
     for n in sizes:
         base = np.concatenate([real, augment(real, max(0, n - len(real)), seed=n)])[:n]
         ids = np.arange(n, dtype=np.int64)
-        built = {}
+        built: dict[str, tuple[Any, float]] = {}
         for label, index in (("flat", FaissL1Index(64)), ("ivf", ApproxL1Index(64))):
             t = time.perf_counter()
             for s in range(0, n, 100_000):  # add in batches, as an ingestion backlog would
@@ -164,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.tiny:
         run((2000,), n_queries=20, name="search-tiny", real_limit=60)
         return 0
-    sizes = (10_000, 100_000) if args.short else (10_000, 100_000, 1_000_000)
+    sizes: tuple[int, ...] = (10_000, 100_000) if args.short else (10_000, 100_000, 1_000_000)
     if args.sizes:
         sizes = tuple(int(float(s)) for s in args.sizes.split(","))
     run(sizes, name="search-short" if args.short else "search")

@@ -153,6 +153,8 @@ def fill_index(data_dir: Path, target: int, seed: int = 0) -> int:
     ctx = open_context(Settings(data_dir=data_dir, dev_mode=True))
     with ctx.db.read() as conn:
         record = vocab_repo.active(conn)
+        if record is None:
+            raise RuntimeError("the service has no active vocabulary to fill the index for")
         _, real, _ = vocab_repo.vectors(conn, record.id)
     missing = target - len(real)
     if missing <= 0:

@@ -22,12 +22,16 @@ from __future__ import annotations
 
 import threading
 from pathlib import Path
+from typing import Any
 
-import faiss
+import faiss as _faiss_typed
 import numpy as np
 
 from app.index.base import IndexFileError, as_ids, as_vectors
 from app.storage.blobs import atomic_write
+
+# faiss's type stubs lack DirectMap, IVF attributes and the SearchParameters keywords: use it untyped
+faiss: Any = _faiss_typed
 
 TRAIN_AT = 20_000  # below this many vectors the flat scan is already < ~1 ms per query
 MAX_NLIST = 2048
@@ -50,7 +54,7 @@ class ApproxL1Index:
     def __init__(
         self,
         dim: int,
-        index: faiss.Index | None = None,
+        index: Any = None,
         train_at: int = TRAIN_AT,
         nprobe: int | None = None,
         trained_count: int = 0,
@@ -207,7 +211,7 @@ class ApproxL1Index:
         self._index, self.trained_count = ivf, trained
 
 
-def _build_ivf(dim: int, ids: np.ndarray, vectors: np.ndarray) -> faiss.IndexIVFFlat:
+def _build_ivf(dim: int, ids: np.ndarray, vectors: np.ndarray) -> Any:
     """IVF-Flat (L1) over `vectors` (n, dim) with `ids` (n,): seconds at 1e6 vectors."""
     nlist = nlist_for(len(ids))
     quantizer = faiss.IndexFlat(dim, faiss.METRIC_L1)
@@ -224,7 +228,7 @@ def _build_ivf(dim: int, ids: np.ndarray, vectors: np.ndarray) -> faiss.IndexIVF
     return ivf
 
 
-def _remove(index: faiss.Index, ids: np.ndarray) -> int:
+def _remove(index: Any, ids: np.ndarray) -> int:
     if len(ids) == 0:
         return 0
     # an IVF with a hashtable direct map removes only through an IDSelectorArray
@@ -232,11 +236,11 @@ def _remove(index: faiss.Index, ids: np.ndarray) -> int:
     return int(index.remove_ids(selector))
 
 
-def _flat(dim: int) -> faiss.Index:
+def _flat(dim: int) -> Any:
     return faiss.IndexIDMap2(faiss.IndexFlat(dim, faiss.METRIC_L1))
 
 
-def _flat_vectors(index: faiss.IndexIDMap2, ids: np.ndarray) -> np.ndarray:
+def _flat_vectors(index: Any, ids: np.ndarray) -> np.ndarray:
     """(n, dim) vectors of an IndexIDMap2 ordered like `ids`."""
     stored = faiss.vector_to_array(index.id_map).astype(np.int64)
     raw = index.index.reconstruct_n(0, index.ntotal)
@@ -244,7 +248,7 @@ def _flat_vectors(index: faiss.IndexIDMap2, ids: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(raw[order[np.searchsorted(stored[order], ids)]])
 
 
-def _held_ids(index: faiss.Index) -> np.ndarray:
+def _held_ids(index: Any) -> np.ndarray:
     if isinstance(index, faiss.IndexIDMap2):
         return np.sort(faiss.vector_to_array(index.id_map).astype(np.int64))
     invlists = index.invlists
