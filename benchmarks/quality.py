@@ -162,7 +162,10 @@ def main(argv: list[str] | None = None) -> int:
     elif args.short:
         run(5, 8, args.vertices, name="quality-short")
     else:
-        run(args.classes, args.per_class, args.vertices)
+        suffix = "" if (args.classes, args.per_class, args.vertices) == (6, 20, 4000) else (
+            f"-{args.classes}x{args.per_class}-{args.vertices}"
+        )
+        run(args.classes, args.per_class, args.vertices, name=f"quality{suffix}")
     return 0
 
 
