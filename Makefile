@@ -33,8 +33,9 @@ test: install  ## run the whole test suite (what CI runs)
 test-fast: install  ## the suite without slow (dataset-wide, multi-process) tests
 	$(BIN)/pytest -q -m "not slow and not docker"
 
-lint: install  ## ruff
+lint: install  ## ruff + mypy
 	$(BIN)/ruff check app tests benchmarks
+	$(BIN)/mypy app
 
 format: install  ## ruff format + autofix
 	$(BIN)/ruff check --fix app tests benchmarks

@@ -78,7 +78,7 @@ def detect(hks: np.ndarray, faces: np.ndarray, flt: KeypointFilter = KeypointFil
     adjacency = ring_adjacency(faces, n, rings=2)
     nb_max, nb_mean = neighbourhood_stats(hks, adjacency)
     is_max = hks > nb_max  # (n, m): strict 2-ring maximum at each scale
-    candidates = is_max.any(axis=1)
+    candidates = np.asarray(is_max.any(axis=1))
     if not flt.enabled:
         return candidates
     persistence = is_max.sum(axis=1) / m  # (n,)

@@ -97,7 +97,7 @@ def _parse(data: bytes, file_type: str) -> tuple[np.ndarray, np.ndarray]:
         if fast is not None:
             return fast
     try:
-        loaded = trimesh.load(io.BytesIO(data), file_type=file_type, process=False)
+        loaded: object = trimesh.load(io.BytesIO(data), file_type=file_type, process=False)
         if isinstance(loaded, trimesh.Scene):
             # GLB/PLY scenes: bake the node transforms and merge every triangle mesh
             geometry = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)]

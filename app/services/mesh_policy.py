@@ -21,7 +21,7 @@ def nonmanifold_faces(faces: np.ndarray) -> np.ndarray:
     """faces (f, 3) int -> (f,) bool: the face has an edge shared by more than two faces."""
     edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)  # (3f, 2)
     _, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
-    return (counts[inverse.ravel()] > 2).reshape(-1, 3).any(axis=1)
+    return np.asarray((counts[inverse.ravel()] > 2).reshape(-1, 3).any(axis=1))
 
 
 def check_surface(mesh: Mesh) -> Mesh:
