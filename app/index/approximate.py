@@ -27,7 +27,7 @@ from typing import Any
 import faiss as _faiss_typed
 import numpy as np
 
-from app.index.base import IndexFileError, as_ids, as_vectors
+from app.index.base import IndexFileError, as_batch, as_ids, as_vectors, no_hits, read_faiss
 from app.storage.blobs import atomic_write
 
 # faiss's type stubs lack DirectMap, IVF attributes and the SearchParameters keywords: use it untyped
@@ -83,11 +83,7 @@ class ApproxL1Index:
         return self._ids.copy()
 
     def add(self, ids: np.ndarray, vectors: np.ndarray) -> None:
-        ids, vectors = as_ids(ids), as_vectors(vectors, self.dim)
-        if len(ids) != len(vectors):
-            raise ValueError(f"{len(ids)} ids for {len(vectors)} vectors")
-        if len(np.unique(ids)) != len(ids):
-            raise ValueError("duplicate ids in one add")
+        ids, vectors = as_batch(ids, vectors, self.dim)
         self._maybe_swap()
         self.remove(ids)  # a re-added id replaces its vector
         self._index.add_with_ids(vectors, ids)
@@ -124,11 +120,10 @@ class ApproxL1Index:
         self, vectors: np.ndarray, k: int, allowed_ids: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         q = as_vectors(vectors, self.dim)
-        if k <= 0:
-            raise ValueError("k must be positive")
+        empty = no_hits(len(q), k)  # also checks k
         self._maybe_swap()
         if self.count == 0 or (allowed_ids is not None and len(allowed_ids) == 0):
-            return np.full((len(q), k), np.inf, np.float32), np.full((len(q), k), -1, np.int64)
+            return empty
         sel = faiss.IDSelectorBatch(as_ids(allowed_ids)) if allowed_ids is not None else None
         if self.approximate:
             nprobe = self.nprobe or default_nprobe(self._index.nlist)
@@ -148,13 +143,7 @@ class ApproxL1Index:
 
     @classmethod
     def load(cls, path: Path) -> ApproxL1Index:
-        path = Path(path)
-        if not path.is_file():
-            raise IndexFileError(f"no index file at {path}")
-        try:
-            index = faiss.read_index(str(path))
-        except RuntimeError as exc:
-            raise IndexFileError(f"unreadable index file {path}: {str(exc).splitlines()[0]}") from exc
+        index = read_faiss(path)
         if isinstance(index, faiss.IndexIVFFlat):
             if index.direct_map.type != faiss.DirectMap.Hashtable:
                 index.set_direct_map_type(faiss.DirectMap.Hashtable)

@@ -47,6 +47,36 @@ class ShapeIndex(Protocol):
     def save(self, path: Path) -> None: ...
 
 
+def as_batch(ids: np.ndarray, vectors: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """Validate an add(): (n,) int64 unique ids and (n, dim) float32 vectors."""
+    ids, vectors = as_ids(ids), as_vectors(vectors, dim)
+    if len(ids) != len(vectors):
+        raise ValueError(f"{len(ids)} ids for {len(vectors)} vectors")
+    if len(np.unique(ids)) != len(ids):
+        raise ValueError("duplicate ids in one add")
+    return ids, vectors
+
+
+def no_hits(n_queries: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The answer when nothing can match: distances inf, ids -1, both (q, k)."""
+    if k <= 0:
+        raise ValueError("k must be positive")
+    return np.full((n_queries, k), np.inf, np.float32), np.full((n_queries, k), -1, np.int64)
+
+
+def read_faiss(path: Path):  # -> faiss.Index (faiss is untyped; imported here only when a file is read)
+    """Read a FAISS index file, turning a missing or corrupt file into IndexFileError."""
+    import faiss
+
+    path = Path(path)
+    if not path.is_file():
+        raise IndexFileError(f"no index file at {path}")
+    try:
+        return faiss.read_index(str(path))
+    except RuntimeError as exc:
+        raise IndexFileError(f"unreadable index file {path}: {str(exc).splitlines()[0]}") from exc
+
+
 def as_ids(ids: np.ndarray | list[int]) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(ids, dtype=np.int64).reshape(-1))
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import faiss
 import numpy as np
 
-from app.index.base import IndexFileError, as_ids, as_vectors
+from app.index.base import IndexFileError, as_batch, as_ids, as_vectors, no_hits, read_faiss
 from app.storage.blobs import atomic_write
 
 # below this many (query, vector) pairs one thread wins: waking an OpenMP team costs more than the scan
@@ -43,11 +43,7 @@ class FaissL1Index:
         return np.sort(faiss.vector_to_array(self._index.id_map).astype(np.int64))  # type: ignore[attr-defined]
 
     def add(self, ids: np.ndarray, vectors: np.ndarray) -> None:
-        ids, vectors = as_ids(ids), as_vectors(vectors, self.dim)
-        if len(ids) != len(vectors):
-            raise ValueError(f"{len(ids)} ids for {len(vectors)} vectors")
-        if len(np.unique(ids)) != len(ids):
-            raise ValueError("duplicate ids in one add")
+        ids, vectors = as_batch(ids, vectors, self.dim)
         self.remove(ids)  # IndexIDMap2 would keep both copies of a re-added id
         self._index.add_with_ids(vectors, ids)
 
@@ -61,10 +57,9 @@ class FaissL1Index:
         self, vectors: np.ndarray, k: int, allowed_ids: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         q = as_vectors(vectors, self.dim)
-        if k <= 0:
-            raise ValueError("k must be positive")
+        empty = no_hits(len(q), k)  # also checks k
         if self.count == 0 or (allowed_ids is not None and len(allowed_ids) == 0):
-            return np.full((len(q), k), np.inf, np.float32), np.full((len(q), k), -1, np.int64)
+            return empty
         params = None
         if allowed_ids is not None:
             params = faiss.SearchParameters(sel=faiss.IDSelectorBatch(as_ids(allowed_ids)))  # type: ignore[call-arg]
@@ -78,13 +73,7 @@ class FaissL1Index:
 
     @classmethod
     def load(cls, path: Path) -> FaissL1Index:
-        path = Path(path)
-        if not path.is_file():
-            raise IndexFileError(f"no index file at {path}")
-        try:
-            index = faiss.read_index(str(path))
-        except RuntimeError as exc:
-            raise IndexFileError(f"unreadable index file {path}: {str(exc).splitlines()[0]}") from exc
+        index = read_faiss(path)
         if not isinstance(index, faiss.IndexIDMap2) or index.metric_type != faiss.METRIC_L1:
             raise IndexFileError(f"{path} is not an IndexIDMap2 with the L1 metric")
         return cls(index.d, index)

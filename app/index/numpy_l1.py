@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.index.base import IndexFileError, as_ids, as_vectors
+from app.index.base import IndexFileError, as_batch, as_ids, as_vectors, no_hits
 from app.storage.blobs import atomic_write
 
 
@@ -25,11 +25,7 @@ class NumpyL1Index:
         return np.sort(self._ids)
 
     def add(self, ids: np.ndarray, vectors: np.ndarray) -> None:
-        ids, vectors = as_ids(ids), as_vectors(vectors, self.dim)
-        if len(ids) != len(vectors):
-            raise ValueError(f"{len(ids)} ids for {len(vectors)} vectors")
-        if len(np.unique(ids)) != len(ids):
-            raise ValueError("duplicate ids in one add")
+        ids, vectors = as_batch(ids, vectors, self.dim)
         self.remove(ids)
         self._ids = np.concatenate([self._ids, ids])
         self._vectors = np.concatenate([self._vectors, vectors])
@@ -44,10 +40,7 @@ class NumpyL1Index:
         self, vectors: np.ndarray, k: int, allowed_ids: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         q = as_vectors(vectors, self.dim)
-        if k <= 0:
-            raise ValueError("k must be positive")
-        out_d = np.full((len(q), k), np.inf, np.float32)
-        out_i = np.full((len(q), k), -1, np.int64)
+        out_d, out_i = no_hits(len(q), k)  # also checks k
         mask = np.ones(self.count, bool) if allowed_ids is None else np.isin(self._ids, as_ids(allowed_ids))
         ids, base = self._ids[mask], self._vectors[mask]
         if len(ids) == 0:
