@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from app.core.mesh import Mesh, load_mesh, simplify
+from app.core.mesh import Mesh, load_mesh
+from app.core.resolution import simplify
 
 DEFAULT_DATASET = Path("/work/shared/datasets/shrec11-simplified")
 

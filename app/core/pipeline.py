@@ -15,7 +15,8 @@ import numpy as np
 from app.core import hks as hks_mod
 from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import cotangent_laplacian
-from app.core.mesh import Mesh, normalize_scale, to_resolution
+from app.core.mesh import Mesh
+from app.core.resolution import normalize_scale, to_resolution
 from app.core.spectrum import smallest_eigenpairs
 
 DESCRIPTION_FORMAT = 1

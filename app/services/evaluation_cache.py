@@ -23,8 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from app.core.baselines import D2_BINS, D2_PAIRS, d2_histogram
-from app.core.mesh import InvalidMeshError, Mesh, load_mesh, perturb
+from app.core.mesh import InvalidMeshError, Mesh, load_mesh
 from app.core.pipeline import DescribeParams, ShapeDescription, describe
+from app.core.resolution import perturb
 from app.core.spectrum import SpectrumError
 
 
@@ -54,8 +55,8 @@ class Variant:
 
 # the modules whose code decides a description or a D2 histogram: editing any of them (the method is
 # being tuned) must invalidate the cache, or an evaluation would silently report stale descriptions
-_DESCRIBE_CODE = ("mesh", "laplacian", "spectrum", "hks", "keypoints", "pipeline")
-_D2_CODE = ("mesh", "baselines")
+_DESCRIBE_CODE = ("mesh", "resolution", "laplacian", "spectrum", "hks", "keypoints", "pipeline")
+_D2_CODE = ("mesh", "resolution", "baselines")
 
 
 def code_fingerprint(modules: Sequence[str]) -> str:

@@ -6,7 +6,8 @@ import numpy as np
 
 from app.core import hks
 from app.core.laplacian import cotangent_laplacian
-from app.core.mesh import Mesh, normalize_scale
+from app.core.mesh import Mesh
+from app.core.resolution import normalize_scale
 from app.core.spectrum import Spectrum, smallest_eigenpairs
 
 

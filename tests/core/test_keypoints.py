@@ -8,7 +8,7 @@ import trimesh
 from app.core import hks
 from app.core.keypoints import KeypointFilter, detect, neighbourhood_stats, ring_adjacency
 from app.core.laplacian import cotangent_laplacian
-from app.core.mesh import normalize_scale
+from app.core.resolution import normalize_scale
 from app.core.spectrum import smallest_eigenpairs
 
 

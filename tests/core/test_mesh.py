@@ -12,9 +12,9 @@ from app.core.mesh import (
     clean,
     detect_format,
     load_mesh,
-    to_resolution,
     validate,
 )
+from app.core.resolution import to_resolution
 
 TETRA_V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
 TETRA_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])

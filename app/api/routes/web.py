@@ -16,7 +16,8 @@ from fastapi.responses import FileResponse
 
 from app.api.deps import SettingsDep
 from app.api.uploads import read_form
-from app.core.mesh import detect_format, simplify
+from app.core.mesh import detect_format
+from app.core.resolution import simplify
 from app.services.errors import NotFoundError
 from app.services.mesh_policy import load_upload
 from app.services.thumbnails import render_png
