@@ -83,16 +83,23 @@ def similar(
     """Models nearest to a stored one (itself excluded)."""
     check_k(k)
     t = time.perf_counter()
-    pair = live.require()
-    with ctx.db.read() as conn:
-        model = models_repo.get(conn, model_id)
-        vector = vocab_repo.vector_of(conn, model_id, pair.record.id) if model else None
-    if model is None:
-        raise NotFoundError(f"no model with id {model_id}")
-    if vector is None:
-        raise ConflictError(f"model {model_id} is {model.status}, not indexed: nothing to compare yet")
     allowed = _allowed(ctx, label)
-    dist, ids, vid = live.search(vector, k + 1, allowed)
-    keep = ids != model_id
-    hits = _hits(ctx, dist[keep], ids[keep], k)
-    return SearchResult(hits, vid, {"search": time.perf_counter() - t})
+    for _ in range(3):  # a vocabulary swap between reading the vector and searching: read again
+        pair = live.require()
+        with ctx.db.read() as conn:
+            model = models_repo.get(conn, model_id)
+            vector = vocab_repo.vector_of(conn, model_id, pair.record.id) if model else None
+        if model is None:
+            raise NotFoundError(f"no model with id {model_id}")
+        if vector is None:
+            raise ConflictError(f"model {model_id} is {model.status}, not indexed: nothing to compare yet")
+        try:
+            dist, ids, vid = live.search(vector, k + 1, allowed, vocabulary_id=pair.record.id)
+        except NotReadyError:
+            if live.pair is None:
+                raise
+            continue
+        keep = ids != model_id
+        hits = _hits(ctx, dist[keep], ids[keep], k)
+        return SearchResult(hits, vid, {"search": time.perf_counter() - t})
+    raise NotReadyError("the vocabulary is being swapped; retry")

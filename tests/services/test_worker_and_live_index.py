@@ -103,3 +103,34 @@ def test_live_index_follows_new_vectors_and_rebuilds_a_disagreeing_file(data_dir
     fresh.refresh()
     assert fresh.pair.reconciled.startswith("rebuilt")
     np.testing.assert_array_equal(fresh.pair.index.ids(), np.sort(all_ids))
+
+
+def test_similar_racing_a_swap_reads_the_vector_again(data_dir, monkeypatch):
+    from app.services import search
+
+    ctx = open_context(make_settings(data_dir))
+    live = LiveIndex(ctx)
+    live.refresh()
+    old = live.pair.record.id
+    ids = live.pair.index.ids()
+    replacement = Vocabulary.fit_features(np.random.default_rng(0).random((200, 4)), size=8, run="run5")
+    new_id = vocab_service.register(ctx, replacement, activate=False)
+    with ctx.db.write() as conn:  # every model already encoded with the new vocabulary, as a rebuild does
+        for i, model_id in enumerate(ids):
+            vocab_repo.put_vector(conn, int(model_id), new_id, np.eye(8)[i % 8])
+    real = vocab_repo.vector_of
+    reads = []
+
+    def swap_after_read(conn, model_id, vocabulary_id):
+        reads.append(vocabulary_id)
+        vector = real(conn, model_id, vocabulary_id)
+        if len(reads) == 1:  # the swap lands between reading the old vector and searching
+            with ctx.db.write() as w:
+                vocab_repo.activate(w, new_id)
+            live.refresh()
+        return vector
+
+    monkeypatch.setattr(vocab_repo, "vector_of", swap_after_read)
+    result = search.similar(ctx, live, int(ids[0]), k=3)
+    assert reads == [old, new_id]
+    assert result.vocabulary_id == new_id and len(result.hits) == 3
