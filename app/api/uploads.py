@@ -94,3 +94,14 @@ async def read_form(request: Request, max_bytes: int) -> UploadForm:
 
 def _too_large(max_bytes: int) -> PayloadTooLargeError:
     return PayloadTooLargeError(f"the upload is larger than the limit of {max_bytes / 1e6:g} MB")
+
+
+def multipart_body(file_description: str, **fields: dict) -> dict:
+    """OpenAPI `requestBody` of a multipart form with a required mesh `file` and optional `fields`.
+
+    The routes read the form themselves (streaming, with a byte limit), so FastAPI cannot infer it.
+    """
+    properties = {"file": {"type": "string", "format": "binary", "description": file_description}, **fields}
+    schema = {"type": "object", "required": ["file"], "properties": properties}
+    return {"requestBody": {"required": True, "content": {"multipart/form-data": {"schema": schema}}}}
+

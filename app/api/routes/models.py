@@ -22,7 +22,7 @@ from app.api.schemas import (
     SearchHit,
     SearchResponse,
 )
-from app.api.uploads import read_form
+from app.api.uploads import multipart_body, read_form
 from app.core.mesh import load_mesh
 from app.services import catalog, ingestion, search
 from app.services.errors import InvalidInputError
@@ -32,25 +32,12 @@ from app.storage.blobs import atomic_write
 router = APIRouter(prefix="/models", tags=["models"])
 ERRORS: dict[int | str, dict] = {c: {"model": ErrorResponse} for c in (404, 413, 422, 503)}
 
-UPLOAD_BODY = {
-    "requestBody": {
-        "required": True,
-        "content": {
-            "multipart/form-data": {
-                "schema": {
-                    "type": "object",
-                    "required": ["file"],
-                    "properties": {
-                        "file": {"type": "string", "format": "binary", "description": "OBJ/OFF/PLY/STL/GLB"},
-                        "name": {"type": "string"},
-                        "label": {"type": "string"},
-                        "metadata": {"type": "string", "description": "a JSON object"},
-                    },
-                }
-            }
-        },
-    }
-}
+UPLOAD_BODY = multipart_body(
+    "OBJ/OFF/PLY/STL/GLB",
+    name={"type": "string"},
+    label={"type": "string"},
+    metadata={"type": "string", "description": "a JSON object"},
+)
 
 
 @router.post(

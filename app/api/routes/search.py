@@ -11,31 +11,18 @@ from app.api import limits
 from app.api.deps import RuntimeDep
 from app.api.routes.models import ERRORS, to_response
 from app.api.schemas import SearchResponse
-from app.api.uploads import read_form
+from app.api.uploads import multipart_body, read_form
 from app.core.mesh import detect_format
 from app.services import search
 from app.services.errors import InvalidInputError
 
 router = APIRouter(tags=["search"])
 
-SEARCH_BODY = {
-    "requestBody": {
-        "required": True,
-        "content": {
-            "multipart/form-data": {
-                "schema": {
-                    "type": "object",
-                    "required": ["file"],
-                    "properties": {
-                        "file": {"type": "string", "format": "binary", "description": "the query mesh"},
-                        "k": {"type": "integer", "default": 10, "minimum": 1, "maximum": search.MAX_K},
-                        "label": {"type": "string", "description": "only return models with this label"},
-                    },
-                }
-            }
-        },
-    }
-}
+SEARCH_BODY = multipart_body(
+    "the query mesh",
+    k={"type": "integer", "default": 10, "minimum": 1, "maximum": search.MAX_K},
+    label={"type": "string", "description": "only return models with this label"},
+)
 
 
 @router.post(
