@@ -9,20 +9,15 @@ from fastapi import APIRouter, Body, status
 from app.api.deps import AdminDep, CtxDep, RuntimeDep
 from app.api.schemas import ErrorResponse, JobAccepted, VocabularyPublic, VocabularyRebuild
 from app.core.descriptor import RUNS
+from app.services import maintenance
 from app.services.errors import InvalidInputError
-from app.storage import jobs as jobs_repo
-from app.storage import vocabularies as vocab_repo
 
 router = APIRouter(prefix="/admin", tags=["admin"], responses={401: {"model": ErrorResponse}})
 
 
 def _enqueue(ctx, kind: str, payload: dict) -> JobAccepted:
-    with ctx.db.write() as conn:
-        running = jobs_repo.pending(conn, kind)
-        if running is not None:  # one at a time: answer with the job already under way
-            return JobAccepted(job_id=running.id, state=running.state)
-        job_id = jobs_repo.enqueue(conn, kind, payload=payload)
-    return JobAccepted(job_id=job_id, state="queued")
+    job_id, state = maintenance.enqueue_once(ctx, kind, payload)  # a pending one answers instead
+    return JobAccepted(job_id=job_id, state=state)
 
 
 @router.post("/vocabulary/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted)
@@ -44,9 +39,7 @@ def rebuild_index(_: AdminDep, ctx: CtxDep) -> JobAccepted:
 
 @router.get("/vocabulary", response_model=VocabularyPublic)
 def get_vocabulary(_: AdminDep, runtime: RuntimeDep) -> VocabularyPublic:
-    with runtime.ctx.db.read() as conn:
-        active = vocab_repo.active(conn)
-        versions = len(vocab_repo.all_versions(conn))
+    active, versions = maintenance.vocabulary_versions(runtime.ctx)
     live = runtime.live.status()
     if active is None:
         return VocabularyPublic(

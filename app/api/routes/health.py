@@ -9,7 +9,7 @@ from prometheus_client import CONTENT_TYPE_LATEST
 
 from app.api.deps import RuntimeDep
 from app.api.schemas import Health, Readiness
-from app.storage import jobs as jobs_repo
+from app.services import maintenance
 
 router = APIRouter(tags=["health"])
 
@@ -34,8 +34,7 @@ def readyz(runtime: RuntimeDep) -> JSONResponse:
         checks["workers"] = runtime.workers.alive() == embedded
         checks["workers_alive"] = runtime.workers.alive()
     else:  # workers run elsewhere (`shapebag worker`): trust their heartbeats
-        with runtime.ctx.db.read() as conn:
-            n = jobs_repo.live_workers(conn, within_s=max(10.0, runtime.ctx.settings.lease_seconds))
+        n = maintenance.live_workers(runtime.ctx)
         checks["workers"] = n > 0
         checks["workers_alive"] = n
     ready = all(checks[k] for k in ("database", "vocabulary", "index", "workers"))

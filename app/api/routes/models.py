@@ -23,11 +23,8 @@ from app.api.schemas import (
     SearchResponse,
 )
 from app.api.uploads import multipart_body, read_form
-from app.core.mesh import load_mesh
-from app.services import catalog, ingestion, search
+from app.services import catalog, ingestion, maintenance, search
 from app.services.errors import InvalidInputError
-from app.services.thumbnails import render_png
-from app.storage.blobs import atomic_write
 
 router = APIRouter(prefix="/models", tags=["models"])
 ERRORS: dict[int | str, dict] = {c: {"model": ErrorResponse} for c in (404, 413, 422, 503)}
@@ -122,15 +119,7 @@ def similar(
 @router.get("/{model_id}/thumbnail.png", responses=ERRORS, response_class=Response)
 def thumbnail(model_id: IdPath, ctx: CtxDep, size: Annotated[int, Query(ge=32, le=1024)] = 256) -> Response:
     """A server-side rendering of the stored mesh (cached under the data directory)."""
-    model = ingestion.get_model(ctx, model_id)
-    path = ctx.blobs.thumbnail_path(model.id, size)
-    if not path.is_file():
-        mesh_path = ctx.blobs.mesh_path(model.sha256, model.file_type)
-        try:
-            mesh = load_mesh(mesh_path, model.file_type, max_vertices=ctx.settings.max_vertices)
-        except ValueError as exc:
-            raise InvalidInputError(f"model {model_id} has no renderable mesh: {exc}") from exc
-        atomic_write(path, render_png(mesh.vertices, mesh.faces, size))
+    path = maintenance.thumbnail_file(ctx, ingestion.get_model(ctx, model_id), size)
     return Response(
         path.read_bytes(),
         media_type="image/png",
