@@ -22,10 +22,17 @@ class DescribeSettings(BaseModel):
     k: int = Field(default=300, ge=2)
     m: int = Field(default=100, ge=4)
     target_vertices: int = Field(default=1000, ge=0)
+    smoothing: int = Field(default=40, ge=0)
     solver: str = "auto"
 
     def params(self) -> DescribeParams:
-        return DescribeParams(k=self.k, m=self.m, target_vertices=self.target_vertices, solver=self.solver)
+        return DescribeParams(
+            k=self.k,
+            m=self.m,
+            target_vertices=self.target_vertices,
+            smoothing=self.smoothing,
+            solver=self.solver,
+        )
 
 
 class EncodeSettings(BaseModel):

@@ -30,6 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--target-vertices", type=int, default=1000,
                    help="canonical resolution of the eigen-solve (0 keeps the input resolution)")
     p.add_argument("--k", type=int, default=300, help="eigenpairs (default 300, the paper's)")
+    p.add_argument("--smoothing", type=int, default=40, help="Taubin iterations before the solve (0: none)")
     p.add_argument("--vocabulary", type=Path, metavar="DIR",
                    help="also encode with this frozen vocabulary (centers.npy + vocabulary.json)")
     p.add_argument("--fit-on", choices=("all", "half"), default="all",
@@ -56,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--target-vertices must be >= 0")
     if args.k < 2:
         raise CommandError("--k must be at least 2")
+    if args.smoothing < 0:
+        raise CommandError("--smoothing must be >= 0")
     options = EvaluationOptions(
         rows=rows,
         vocabulary_size=args.vocabulary_size,
@@ -64,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
         keypoint_filter=not args.no_filter,
         target_vertices=args.target_vertices,
         k=args.k,
+        smoothing=args.smoothing,
         vocabulary=args.vocabulary,
         fit_on=args.fit_on,
         noise=args.noise,

@@ -16,7 +16,7 @@ from app.core import hks as hks_mod
 from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import cotangent_laplacian
 from app.core.mesh import Mesh
-from app.core.resolution import normalize_scale, to_resolution
+from app.core.resolution import normalize_scale, smooth, to_resolution
 from app.core.spectrum import smallest_eigenpairs
 
 DESCRIPTION_FORMAT = 1
@@ -29,6 +29,7 @@ class DescribeParams:
     k: int = 300  # eigenpairs
     m: int = 100  # time scales
     target_vertices: int = 1000  # canonical resolution; 0 keeps the input resolution
+    smoothing: int = 40  # Taubin iterations at the canonical resolution (noise robustness); 0 = none
     solver: str = "auto"  # auto | dense | sparse
     keypoint_filter: KeypointFilter = field(default_factory=KeypointFilter)
 
@@ -88,7 +89,7 @@ def describe(mesh: Mesh, params: DescribeParams | None = None) -> ShapeDescripti
     """Mesh (already validated and cleaned by mesh.load_mesh) -> ShapeDescription."""
     params = params or DescribeParams()
     clock = _Clock()
-    work = normalize_scale(to_resolution(mesh, params.target_vertices))
+    work = normalize_scale(smooth(to_resolution(mesh, params.target_vertices), params.smoothing))
     work = normalize_scale(work)  # resampling changes the area slightly: renormalise
     clock.lap("resample")
     stiffness, mass = cotangent_laplacian(work.vertices, work.faces)

@@ -27,7 +27,7 @@ from app.core.vocabulary import l1_distance as bof_l1
 from app.services import evaluation_cache as cache_mod
 from app.services.evaluation_report import RowResult
 
-PRESETS: tuple[str, ...] = ("paper",)  # run5 at the raw input resolution, as the paper computes it
+PRESETS: tuple[str, ...] = ("paper",)  # run5 at the raw resolution, unsmoothed: as the paper computes it
 BASELINES: tuple[str, ...] = ("shape-dna", "d2")
 ROW_NAMES: tuple[str, ...] = RUNS + PRESETS + BASELINES
 DEFAULT_CACHE = Path(".cache/describe")
@@ -46,6 +46,7 @@ class EvaluationOptions:
     keypoint_filter: bool = True
     target_vertices: int = 1000
     k: int = 300  # eigenpairs
+    smoothing: int = 40  # Taubin iterations
     vocabulary: Path | None = None  # frozen vocabulary directory: adds a "frozen" line per row
     fit_on: str = "all"  # all | half: "half" adds a line with a vocabulary fit on half the classes
     noise: float = 0.0  # > 0: adds a line with noisy queries against the clean database
@@ -79,13 +80,15 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
     if unknown:
         raise EvaluationError(f"unknown row(s) {', '.join(unknown)}; choose from {', '.join(ROW_NAMES)}")
     flt = KeypointFilter(enabled=options.keypoint_filter)
-    base = DescribeParams(k=options.k, target_vertices=options.target_vertices, keypoint_filter=flt)
+    base = DescribeParams(
+        k=options.k, target_vertices=options.target_vertices, smoothing=options.smoothing, keypoint_filter=flt
+    )
     rows = []
     for name in options.rows:
         if name in RUNS:
             rows.append(Row(name, "bof", base, name))
         elif name == "paper":
-            rows.append(Row(name, "bof", replace(base, target_vertices=0), "run5"))
+            rows.append(Row(name, "bof", replace(base, target_vertices=0, smoothing=0), "run5"))
         else:
             rows.append(Row(name, name, base))
     return rows

@@ -105,3 +105,22 @@ def test_resolution_policy_brings_coarse_and_fine_meshes_near_the_target(shrec_m
     assert np.allclose(np.ptp(out.vertices, axis=0), extent, rtol=0.1)
     fine = to_resolution(out, 400)
     assert 400 / 1.5 <= fine.n_vertices <= 400 * 1.5
+
+
+def test_taubin_smoothing_removes_noise_without_shrinking(random_rotation):
+    from app.core.resolution import smooth
+
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    rng = np.random.default_rng(0)
+    unit = np.asarray(sphere.vertices)
+    noisy = Mesh(unit * (1.0 + 0.03 * rng.standard_normal((len(unit), 1))), np.asarray(sphere.faces))
+    out = smooth(noisy, 40)
+    radius_before = np.linalg.norm(noisy.vertices, axis=1)
+    radius_after = np.linalg.norm(out.vertices, axis=1)
+    assert radius_after.std() < radius_before.std() / 3  # the noise is mostly gone
+    assert abs(radius_after.mean() - 1.0) < 0.02  # and the sphere kept its size (λ|μ does not shrink)
+    assert smooth(noisy, 0) is noisy
+    # linear in the coordinates: smoothing commutes with a rotation
+    r = random_rotation(4)
+    rotated = smooth(Mesh(noisy.vertices @ r.T, noisy.faces), 40)
+    assert np.allclose(rotated.vertices, out.vertices @ r.T, atol=1e-9)
