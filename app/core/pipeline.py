@@ -89,8 +89,8 @@ def describe(mesh: Mesh, params: DescribeParams | None = None) -> ShapeDescripti
     """Mesh (already validated and cleaned by mesh.load_mesh) -> ShapeDescription."""
     params = params or DescribeParams()
     clock = _Clock()
+    # resampling and smoothing are scale-free: one normalisation, after them, gives unit area
     work = normalize_scale(smooth(to_resolution(mesh, params.target_vertices), params.smoothing))
-    work = normalize_scale(work)  # resampling changes the area slightly: renormalise
     clock.lap("resample")
     stiffness, mass = cotangent_laplacian(work.vertices, work.faces)
     clock.lap("laplacian")
