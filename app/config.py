@@ -26,13 +26,7 @@ class DescribeSettings(BaseModel):
     solver: str = "auto"
 
     def params(self) -> DescribeParams:
-        return DescribeParams(
-            k=self.k,
-            m=self.m,
-            target_vertices=self.target_vertices,
-            smoothing=self.smoothing,
-            solver=self.solver,
-        )
+        return DescribeParams(**self.model_dump())
 
 
 class EncodeSettings(BaseModel):
@@ -44,13 +38,7 @@ class EncodeSettings(BaseModel):
     area_weighted: bool = False
 
     def params(self) -> EncodeParams:
-        return EncodeParams(
-            mode=self.mode,
-            sigma_scale=self.sigma_scale,
-            keypoints_only=self.keypoints_only,
-            area_weighted=self.area_weighted,
-            normalize=True,
-        )
+        return EncodeParams(**self.model_dump())  # normalize keeps its default (True)
 
 
 class Settings(BaseSettings):

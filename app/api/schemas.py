@@ -50,20 +50,7 @@ class ModelPublic(BaseModel):
 
     @classmethod
     def of(cls, m: ModelRecord) -> ModelPublic:
-        return cls(
-            id=m.id,
-            name=m.name,
-            label=m.label,
-            status=m.status,
-            error=m.error,
-            n_vertices=m.n_vertices,
-            file_type=m.file_type,
-            size_bytes=m.size_bytes,
-            sha256=m.sha256,
-            metadata=m.metadata,
-            created_at=m.created_at,
-            updated_at=m.updated_at,
-        )
+        return cls.model_validate(m, from_attributes=True)
 
 
 class ModelsPublic(BaseModel):
@@ -92,18 +79,7 @@ class JobPublic(BaseModel):
 
     @classmethod
     def of(cls, j: JobRecord) -> JobPublic:
-        return cls(
-            id=j.id,
-            kind=j.kind,
-            state=j.state,
-            model_id=j.model_id,
-            attempts=j.attempts,
-            error=j.error,
-            timings=j.timings,
-            payload=j.payload,
-            created_at=j.created_at,
-            updated_at=j.updated_at,
-        )
+        return cls.model_validate(j, from_attributes=True)  # lease_until, worker: internal, not copied
 
 
 class JobAccepted(BaseModel):
@@ -133,14 +109,16 @@ class VocabularyRebuild(BaseModel):
 
 
 class VocabularyPublic(BaseModel):
-    id: int | None
-    words: int | None
-    run: str | None
-    trained_on_descriptors: int | None
-    created_at: str | None
-    indexed_models: int
-    versions: int
-    metadata: dict[str, Any]
+    """The active vocabulary; every field but the counts is null before the first one exists."""
+
+    id: int | None = None
+    words: int | None = None
+    run: str | None = None
+    trained_on_descriptors: int | None = None
+    created_at: str | None = None
+    indexed_models: int = 0
+    versions: int = 0
+    metadata: dict[str, Any] = Field(default_factory=dict)
 
 
 class Health(BaseModel):

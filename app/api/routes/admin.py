@@ -42,16 +42,7 @@ def get_vocabulary(_: AdminDep, runtime: RuntimeDep) -> VocabularyPublic:
     active, versions = maintenance.vocabulary_versions(runtime.ctx)
     live = runtime.live.status()
     if active is None:
-        return VocabularyPublic(
-            id=None,
-            words=None,
-            run=None,
-            trained_on_descriptors=None,
-            created_at=None,
-            indexed_models=0,
-            versions=versions,
-            metadata={},
-        )
+        return VocabularyPublic(versions=versions)
     return VocabularyPublic(
         id=active.id,
         words=active.size,
