@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Literal
 
 from pydantic import BaseModel, Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -19,10 +20,11 @@ SHIPPED_VOCABULARY = REPO_ROOT / "data" / "vocabulary" / "default"
 class DescribeSettings(BaseModel):
     """Per-shape computation (SHAPEBAG_DESCRIBE__K=300 ...)."""
 
-    k: int = Field(default=300, ge=2)
-    m: int = Field(default=100, ge=4)
-    target_vertices: int = Field(default=1000, ge=0)
-    smoothing: int = Field(default=40, ge=0)
+    k: int = Field(default=DescribeParams.k, ge=2)
+    m: int = Field(default=DescribeParams.m, ge=4)
+    target_vertices: int = Field(default=DescribeParams.target_vertices, ge=0)
+    smoothing: int = Field(default=DescribeParams.smoothing, ge=0)
+    subdivision: Literal["midpoint", "loop"] = "midpoint"
     solver: str = "auto"
 
     def params(self) -> DescribeParams:

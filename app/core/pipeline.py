@@ -30,6 +30,7 @@ class DescribeParams:
     m: int = 100  # time scales
     target_vertices: int = 1000  # canonical resolution; 0 keeps the input resolution
     smoothing: int = 40  # Taubin iterations at the canonical resolution (noise robustness); 0 = none
+    subdivision: str = "midpoint"  # how coarse meshes reach the canonical resolution: midpoint | loop
     solver: str = "auto"  # auto | dense | sparse
     keypoint_filter: KeypointFilter = field(default_factory=KeypointFilter)
 
@@ -90,7 +91,8 @@ def describe(mesh: Mesh, params: DescribeParams | None = None) -> ShapeDescripti
     params = params or DescribeParams()
     clock = _Clock()
     # resampling and smoothing are scale-free: one normalisation, after them, gives unit area
-    work = normalize_scale(smooth(to_resolution(mesh, params.target_vertices), params.smoothing))
+    fine = to_resolution(mesh, params.target_vertices, subdivision=params.subdivision)
+    work = normalize_scale(smooth(fine, params.smoothing))
     clock.lap("resample")
     stiffness, mass = cotangent_laplacian(work.vertices, work.faces)
     clock.lap("laplacian")

@@ -23,20 +23,36 @@ def normalize_scale(mesh: Mesh) -> Mesh:
     return Mesh((mesh.vertices - centre) / np.sqrt(areas.sum()), mesh.faces)
 
 
-def to_resolution(mesh: Mesh, target_vertices: int, tolerance: float = 1.5) -> Mesh:
+SUBDIVISIONS = ("midpoint", "loop")
+
+
+def to_resolution(
+    mesh: Mesh, target_vertices: int, tolerance: float = 1.5, subdivision: str = "midpoint"
+) -> Mesh:
     """Canonical resolution policy: bring the vertex count within [target/tol, target*tol].
 
-    Coarse meshes are Loop-subdivided (each step ~4x the vertices; Loop smooths, which is what a
-    coarse approximation of a smooth surface wants); fine meshes are simplified with quadric error
-    decimation (fast-simplification), which keeps the shape at a bounded cost. The eigen-solve then
-    always runs at about `target_vertices`, so descriptors of the same shape at different input
-    resolutions agree and the cost of describing is bounded.
+    Coarse meshes are subdivided at edge midpoints (each step ~4x the vertices); fine meshes are
+    simplified with quadric error decimation (fast-simplification), which keeps the shape at a bounded
+    cost. The eigen-solve then always runs at about `target_vertices`, so descriptors of the same shape
+    at different input resolutions agree and the cost of describing is bounded.
+
+    Midpoint rather than Loop subdivision: it adds sample points and leaves the surface exactly where
+    it is, whereas Loop's limit surface shrinks a coarse mesh (a 500-face SHREC'11 mesh loses 13-16 %
+    of its area, most of it on thin limbs and small protrusions that tell classes apart). Measured on
+    SHREC'11, Run 5: mAP 99.18 against 98.84 with Loop (mean of 3 k-means seeds) and a smaller drop
+    under noise (docs/results.md). The Taubin step that follows in describe() rounds the flat facets.
+    subdivision="loop" keeps the first policy for comparison.
     """
+    if subdivision not in SUBDIVISIONS:
+        raise ValueError(f"subdivision must be one of {', '.join(SUBDIVISIONS)}, not {subdivision!r}")
     if target_vertices <= 0:
         return mesh
     out = mesh
     while out.n_vertices * tolerance < target_vertices:
-        v, f = trimesh.remesh.subdivide_loop(out.vertices, out.faces, iterations=1)
+        if subdivision == "loop":
+            v, f = trimesh.remesh.subdivide_loop(out.vertices, out.faces, iterations=1)
+        else:
+            v, f = trimesh.remesh.subdivide(out.vertices, out.faces)
         out = Mesh(np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64))
     if out.n_vertices > target_vertices * tolerance:
         out = simplify(out, target_vertices)

@@ -98,13 +98,24 @@ def test_detect_format():
 def test_resolution_policy_brings_coarse_and_fine_meshes_near_the_target(shrec_mesh, target):
     out = to_resolution(shrec_mesh, target)
     assert target / 1.5 <= out.n_vertices <= target * 1.5
-    # the shape survives: Loop's limit surface lies inside the control mesh, so a 500-face mesh loses
-    # some area (measured ~13-16% here) but keeps its extent
-    assert 0.75 < out.area() / shrec_mesh.area() <= 1.0
-    extent = np.ptp(shrec_mesh.vertices, axis=0)
-    assert np.allclose(np.ptp(out.vertices, axis=0), extent, rtol=0.1)
-    fine = to_resolution(out, 400)
+    # midpoint subdivision adds samples on the same surface: area and extent are unchanged, and
+    # every original vertex is still a vertex, where it was (Loop would shrink the mesh by 13-16 %)
+    assert out.area() == pytest.approx(shrec_mesh.area(), rel=1e-9)
+    assert np.allclose(np.ptp(out.vertices, axis=0), np.ptp(shrec_mesh.vertices, axis=0), rtol=1e-9)
+    assert np.allclose(out.vertices[: shrec_mesh.n_vertices], shrec_mesh.vertices)
+    fine = to_resolution(out, 400)  # quadric decimation: the shape survives within a few percent
     assert 400 / 1.5 <= fine.n_vertices <= 400 * 1.5
+    assert 0.8 < fine.area() / out.area() <= 1.05
+    assert np.allclose(np.ptp(fine.vertices, axis=0), np.ptp(out.vertices, axis=0), rtol=0.1)
+
+
+def test_loop_subdivision_shrinks_a_coarse_mesh_which_is_why_midpoint_is_the_default(shrec_mesh):
+    loop = to_resolution(shrec_mesh, 1000, subdivision="loop")
+    assert loop.n_vertices == to_resolution(shrec_mesh, 1000).n_vertices  # same sampling density
+    # Loop's limit surface lies inside the control mesh: a 500-face mesh loses 13-16 % of its area
+    assert 0.75 < loop.area() / shrec_mesh.area() < 0.95
+    with pytest.raises(ValueError, match="subdivision"):
+        to_resolution(shrec_mesh, 1000, subdivision="butterfly")
 
 
 def test_taubin_smoothing_removes_noise_without_shrinking(random_rotation):

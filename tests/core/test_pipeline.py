@@ -39,9 +39,12 @@ def test_bof_is_unchanged_by_rigid_motion_scale_and_vertex_order(shrec_mesh, ran
     assert moved.n_vertices == base.n_vertices
     # the HKS is the same set of per-vertex signatures (vertex order may differ after resampling)
     # (matched by nearest neighbour: sorting float rows would pair near-ties differently)
-    nearest, _ = cKDTree(moved.hks).query(base.hks)
+    nearest, match = cKDTree(moved.hks).query(base.hks)
     assert nearest.max() < 1e-4
-    assert base.keypoints.sum() == moved.keypoints.sum()
+    # the same keypoints, up to a point whose persistence or contrast sits on a filter threshold, where
+    # rounding (a permuted eigen-solve) may tip it either way; vertex order leaking in would flip dozens
+    flips = np.count_nonzero(base.keypoints != moved.keypoints[match])
+    assert flips <= 2, f"{flips} keypoints differ"
     a, b = vocab.encode(base), vocab.encode(moved)
     # hard VQ may flip a vertex sitting on a Voronoi boundary: at most a few of ~1000 vertices
     assert l1_distance(a[None], b[None])[0, 0] <= 4 * 2.0 / base.n_vertices
@@ -81,3 +84,4 @@ def test_fingerprint_names_every_parameter_that_changes_the_description():
     assert a.fingerprint() != DescribeParams(k=200).fingerprint()
     assert a.fingerprint() != DescribeParams(target_vertices=0).fingerprint()
     assert a.fingerprint() != DescribeParams(smoothing=0).fingerprint()
+    assert a.fingerprint() != DescribeParams(subdivision="loop").fingerprint()
