@@ -27,10 +27,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     scope.add_argument("--keypoints-only", action="store_true", help="BoF over the keypoints only")
     scope.add_argument("--all-vertices", action="store_true", help="BoF over every vertex (default)")
     p.add_argument("--no-filter", action="store_true", help="keep every 2-ring HKS maximum as a keypoint")
-    p.add_argument("--target-vertices", type=int, default=1000,
+    p.add_argument("--target-vertices", type=int, default=EvaluationOptions.target_vertices,
                    help="canonical resolution of the eigen-solve (0 keeps the input resolution)")
-    p.add_argument("--k", type=int, default=300, help="eigenpairs (default 300, the paper's)")
-    p.add_argument("--smoothing", type=int, default=40, help="Taubin iterations before the solve (0: none)")
+    p.add_argument("--k", type=int, default=EvaluationOptions.k,
+                   help="eigenpairs (default %(default)s, the paper's)")
+    p.add_argument("--smoothing", type=int, default=EvaluationOptions.smoothing,
+                   help="Taubin iterations before the eigen-solve (0: none; default %(default)s)")
+    p.add_argument("--subdivision", choices=("midpoint", "loop"), default=EvaluationOptions.subdivision,
+                   help="how coarse meshes are refined to the canonical resolution (default %(default)s)")
     p.add_argument("--vocabulary", type=Path, metavar="DIR",
                    help="also encode with this frozen vocabulary (centers.npy + vocabulary.json)")
     p.add_argument("--fit-on", choices=("all", "half"), default="all",
@@ -38,6 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--noise", type=float, default=0.0, metavar="NSR",
                    help="also query with noisy meshes (noise variance / coordinate variance, e.g. 0.01)")
     p.add_argument("--seed", type=int, default=0, help="k-means and noise seed")
+    p.add_argument("--seeds", type=int, default=1, metavar="N",
+                   help="average BoF lines over N k-means seeds (seed, seed+1, ...) and show their spread")
     p.add_argument("--workers", type=int, default=2, help="describing processes (default 2)")
     p.add_argument("--cache-dir", type=Path, default=DEFAULT_CACHE, help=f"default {DEFAULT_CACHE}")
     p.add_argument("--json", type=Path, metavar="OUT", help="write the table and settings as JSON")
@@ -68,10 +74,12 @@ def run(args: argparse.Namespace) -> int:
         target_vertices=args.target_vertices,
         k=args.k,
         smoothing=args.smoothing,
+        subdivision=args.subdivision,
         vocabulary=args.vocabulary,
         fit_on=args.fit_on,
         noise=args.noise,
         seed=args.seed,
+        seeds=args.seeds,
         workers=args.workers,
         cache_dir=args.cache_dir,
         progress=not args.quiet,

@@ -39,6 +39,8 @@ def format_table(result: EvaluationResult) -> str:
     width = max([len(r.name) for r in result.rows] + [len("Row")])
     head = f"{'Row':<{width}}  {'NN':>6} {'FT':>6} {'ST':>6} {'E':>6} {'DCG':>6} {'mAP(%)':>7} {'d':>4}"
     head += f" {'ΔmAP':>7} {'s':>6}"
+    spread = any("mAP_sd" in r.details for r in result.rows)
+    head += f" {'sd':>5}" if spread else ""
     lines = [head, "-" * len(head)]
     for r in result.rows:
         s = r.scores
@@ -46,9 +48,13 @@ def format_table(result: EvaluationResult) -> str:
         lines.append(
             f"{r.name:<{width}}  {s['NN']:6.3f} {s['FT']:6.3f} {s['ST']:6.3f} {s['E']:6.3f} {s['DCG']:6.3f}"
             f" {100 * s['mAP']:7.2f} {r.d:>4} {delta:>7} {r.seconds:6.1f}"
+            + (f" {100 * r.details['mAP_sd']:5.2f}" if "mAP_sd" in r.details else " " * 6 if spread else "")
         )
     ds = result.describe
     lines.append("-" * len(head))
+    if spread:
+        seeds = result.options.seeds
+        lines.append(f"BoF lines: mean over {seeds} k-means seeds; sd = spread of their mAP (%)")
     lines.append(
         f"{result.shapes} shapes, {result.classes} classes; descriptions: {ds['computed']} computed, "
         f"{ds['cached']} from the cache in {ds['seconds']:.1f} s; total {result.seconds:.1f} s"

@@ -196,3 +196,24 @@ def test_cache_keys_separate_parameters_variants_and_code(
     fingerprint = evaluation_cache.code_fingerprint(("mesh", "pipeline"))
     monkeypatch.setitem(evaluation_cache._FINGERPRINTS, "describe", fingerprint)
     assert evaluation_cache.DescriptionCache(tmp_path).description_path("ab", p1, clean) not in paths
+
+
+def test_seeds_average_the_bof_lines_over_k_means_seeds(folder: Path, tmp_path: Path) -> None:
+    cache = tmp_path / "cache"
+    rows = ("run5",)
+    single = [evaluate(folder, _options(cache, rows=rows, fit_on="half", seed=s)) for s in (3, 4)]
+    # the noisy queries keep the first seed's noise: only the vocabulary's k-means seed varies
+    both = evaluate(folder, _options(cache, rows=rows, noise=0.01, fit_on="half", seed=3, seeds=2))
+    assert [r.name for r in both.rows] == ["run5", "run5 [fit on 2/3 classes]", "run5 [noise 0.01]"]
+    for i, line in enumerate(both.rows[:2]):
+        per_seed = [s.rows[i].scores for s in single]
+        for metric, value in line.scores.items():
+            assert value == pytest.approx(np.mean([p[metric] for p in per_seed]))
+        assert line.details["mAP_per_seed"] == pytest.approx([p["mAP"] for p in per_seed])
+        assert line.details["mAP_sd"] == pytest.approx(np.std([p["mAP"] for p in per_seed]))
+    assert len(both.rows[2].details["mAP_per_seed"]) == 2
+    main = both.rows[0]
+    assert all(line.reference is main for line in both.rows[1:])  # Δ against the mean clean line
+    assert "mean over 2 k-means seeds" in format_table(both)
+    with pytest.raises(EvaluationError, match="--seeds"):
+        evaluate(folder, _options(cache, rows=rows, seeds=0))
