@@ -143,12 +143,38 @@ def rebuild_vocabulary(
         for mid, vec in zip(ids, vectors, strict=True):
             if mid in alive:  # deleted during the rebuild: skip
                 vocab_repo.put_vector(conn, mid, vid, vec)
+        replaced = vocab_repo.active(conn)
         vocab_repo.activate(conn, vid)
+        stale = stale_versions(vocab_repo.all_versions(conn), vid, replaced)
+        pruned = vocab_repo.delete_inactive(conn, stale)
+    remove_version_files(ctx, pruned)
+    timings["pruned_versions"] = float(len(pruned))
     timings["encoded_after_swap"] = float(len(encode_missing(ctx, vid)))
     with ctx.db.write() as conn:
         jobs_repo.mark_done(conn, job_id, dict(timings, vocabulary_id=vid, models=len(ids)))
     log.info("vocabulary version %d active (%d words, %d models)", vid, vocab.size, len(ids))
     return timings
+
+
+def stale_versions(
+    versions: list[VocabularyRecord], new_id: int, replaced: VocabularyRecord | None
+) -> list[int]:
+    """Versions a swap to `new_id` leaves unused: all but the new one and the one it replaced.
+
+    The replaced version stays one more round: the API process serves it until its next poll, and a
+    request pinned to it must still find its vectors. Older versions are served by nobody, and a
+    version whose rebuild was killed before its swap (inactive, never served) goes with them.
+    """
+    keep = {new_id} | ({replaced.id} if replaced is not None else set())
+    return [v.id for v in versions if v.id not in keep and not v.active and v.id < new_id]
+
+
+def remove_version_files(ctx: ServiceContext, vocabulary_ids: list[int]) -> None:
+    """Delete the directories of deleted versions (after the commit: a crash leaves files, not rows)."""
+    for vid in vocabulary_ids:
+        shutil.rmtree(ctx.vocabulary_dir(vid), ignore_errors=True)
+    if vocabulary_ids:
+        log.info("pruned vocabulary versions %s", ", ".join(map(str, vocabulary_ids)))
 
 
 def encode_missing(ctx: ServiceContext, vocabulary_id: int) -> list[int]:

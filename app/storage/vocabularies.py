@@ -69,6 +69,17 @@ def get(conn: sqlite3.Connection, vocabulary_id: int) -> VocabularyRecord | None
     return _record(conn.execute("SELECT * FROM vocabularies WHERE id = ?", (vocabulary_id,)).fetchone())
 
 
+def delete_inactive(conn: sqlite3.Connection, vocabulary_ids: list[int]) -> list[int]:
+    """Delete these versions and their BoF vectors, never the active one; returns the ids deleted."""
+    deleted = []
+    for vid in vocabulary_ids:
+        conn.execute("DELETE FROM bof WHERE vocabulary_id = ? AND"
+                     " EXISTS (SELECT 1 FROM vocabularies WHERE id = ? AND active = 0)", (vid, vid))
+        if conn.execute("DELETE FROM vocabularies WHERE id = ? AND active = 0", (vid,)).rowcount:
+            deleted.append(vid)
+    return deleted
+
+
 def all_versions(conn: sqlite3.Connection) -> list[VocabularyRecord]:
     return [_record(r) for r in conn.execute("SELECT * FROM vocabularies ORDER BY id")]  # type: ignore[misc]
 

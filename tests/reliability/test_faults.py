@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import httpx
+import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
@@ -186,6 +187,49 @@ def test_rebuild_survives_a_vocabulary_directory_left_by_a_kill(data_dir):
         assert jobs_repo.get(conn, job_id).state == "done"
         active = vocab_repo.active(conn)
     assert active.id == next_id and Vocabulary.load(ctx.data_dir / active.path).size == 8
+
+
+def test_each_swap_prunes_versions_nobody_serves_including_one_left_by_a_killed_rebuild(data_dir):
+    """A rebuild killed after it registered its version (row + files, inactive) leaves an orphan; the
+    next swap deletes it, rows, vectors and files, and keeps the version it replaced for one more round."""
+    ctx = open_context(make_settings(data_dir))
+
+    def rebuild() -> int:
+        with ctx.db.write() as conn:
+            job_id = jobs_repo.enqueue(conn, "rebuild_vocabulary", payload={"size": 8})
+        Worker(ctx, "pruner").run_once()
+        with ctx.db.read() as conn:
+            job = jobs_repo.get(conn, job_id)
+        assert job.state == "done", job
+        return int(job.timings["vocabulary_id"])
+
+    def bof_rows(vid: int) -> int:
+        with ctx.db.read() as conn:
+            return conn.execute("SELECT COUNT(*) FROM bof WHERE vocabulary_id = ?", (vid,)).fetchone()[0]
+
+    with ctx.db.read() as conn:
+        first = vocab_repo.active(conn).id
+        ready = len(models_repo.ready_ids(conn))
+    orphan = vocabularies.register(ctx, Vocabulary.fit_features(np.random.default_rng(0).random((50, 4)),
+                                                                size=8), activate=False)
+    with ctx.db.write() as conn:  # the killed rebuild had stored some vectors too
+        vocab_repo.put_vector(conn, models_repo.ready_ids(conn)[0], orphan, np.ones(8, np.float32))
+    assert ctx.vocabulary_dir(orphan).is_dir() and bof_rows(orphan) == 1
+
+    second = rebuild()
+    with ctx.db.read() as conn:
+        ids = [v.id for v in vocab_repo.all_versions(conn)]
+    assert ids == [first, second]  # the orphan is gone, the replaced version stays
+    assert bof_rows(orphan) == 0 and not ctx.vocabulary_dir(orphan).exists()
+    assert bof_rows(first) == ready and ctx.vocabulary_dir(first).is_dir()
+
+    third = rebuild()
+    with ctx.db.read() as conn:
+        assert [v.id for v in vocab_repo.all_versions(conn)] == [second, third]
+        assert vocab_repo.active(conn).id == third
+    assert bof_rows(first) == 0 and not ctx.vocabulary_dir(first).exists()
+    assert bof_rows(third) == ready
+    assert load_index(ctx.settings.index_backend, ctx.index_path(third)).count == ready
 
 
 def test_unwritable_data_dir_refuses_to_start_with_one_line(tmp_path):
