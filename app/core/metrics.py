@@ -134,3 +134,27 @@ def ranked_scores(ranking: np.ndarray, labels: np.ndarray, query_label: object) 
         raise ValueError("ranking must be a non-empty 1-d array of indices")
     relevant = (np.asarray(labels)[ranking] == query_label)[None, :]
     return {name: float(v[0]) for name, v in relevance_scores(relevant).items()}
+
+
+def class_breakdown(distances: np.ndarray, labels: np.ndarray) -> dict[str, dict]:
+    """Where a ranking loses: per class, its mean AP and the classes that intrude into its first tier.
+
+    distances : (N, N), row = query;  labels : (N,)
+    -> {class: {"mAP": mean AP of its queries, "intruders": {other class: count}}}, the intruders
+       counted over the class's queries in their first C - 1 results, most frequent first.
+    """
+    labels = np.asarray(labels)
+    order = rankings(distances)  # (N, N-1)
+    ap = per_query_scores(distances, labels)["mAP"]
+    out: dict[str, dict] = {}
+    for cls in sorted(set(labels.tolist())):
+        members = np.flatnonzero(labels == cls)
+        tier = len(members) - 1
+        found = labels[order[members, :tier]].ravel() if tier else np.array([], dtype=labels.dtype)
+        names, counts = np.unique(found[found != cls], return_counts=True)
+        ranked = sorted(zip(names.tolist(), counts.tolist(), strict=True), key=lambda nc: (-nc[1], nc[0]))
+        values = ap[members]
+        values = values[~np.isnan(values)]
+        out[str(cls)] = {"mAP": float(values.mean()) if values.size else float("nan"),
+                         "intruders": {str(n): int(c) for n, c in ranked}}
+    return out

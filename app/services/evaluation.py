@@ -54,6 +54,7 @@ class EvaluationOptions:
     noise: float = 0.0  # > 0: adds a line with noisy queries against the clean database
     seed: int = 0
     seeds: int = 1  # k-means seeds seed, seed+1, ...: BoF lines report the mean (and the spread)
+    per_class: bool = False  # print where each clean BoF row loses (per-class mAP, first-tier intruders)
     workers: int = 2
     cache_dir: Path = DEFAULT_CACHE
     progress: bool = True
@@ -229,7 +230,8 @@ def _mean_over_seeds(lines: Sequence[RowResult]) -> RowResult:
         return first
     scores = {m: float(np.mean([line.scores[m] for line in lines])) for m in first.scores}
     maps = [line.scores["mAP"] for line in lines]
-    details = {**first.details, "seeds": len(lines), "mAP_per_seed": maps, "mAP_sd": float(np.std(maps))}
+    details = {**first.details, "seeds": len(lines), "mAP_per_seed": maps, "mAP_sd": float(np.std(maps)),
+               "per_class": _merge_breakdowns([line.details["per_class"] for line in lines])}
     return RowResult(first.name, first.kind, scores, first.d, sum(line.seconds for line in lines),
                      first.reference, details)
 
@@ -245,7 +247,20 @@ def _score_bof(
     scores = metrics.retrieval_scores(distances, labels)
     return RowResult(name, "bof", scores, dimension(row.run), time.perf_counter() - t0, reference,
                      {"run": row.run, "vocabulary_size": vocab.size, "describe": row.describe.fingerprint(),
-                      "encode": asdict(params)})
+                      "encode": asdict(params), "per_class": metrics.class_breakdown(distances, labels)})
+
+
+def _merge_breakdowns(breakdowns: Sequence[dict[str, dict]]) -> dict[str, dict]:
+    """Per-class mAP averaged over seeds; intruder counts summed over them."""
+    merged = {}
+    for cls in breakdowns[0]:
+        counts: dict[str, int] = {}
+        for b in breakdowns:
+            for other, n in b[cls]["intruders"].items():
+                counts[other] = counts.get(other, 0) + n
+        merged[cls] = {"mAP": float(np.mean([b[cls]["mAP"] for b in breakdowns])),
+                       "intruders": dict(sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))}
+    return merged
 
 
 def _baseline_lines(

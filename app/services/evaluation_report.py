@@ -62,7 +62,28 @@ def format_table(result: EvaluationResult) -> str:
     for key, info in ds["descriptions"].items():
         verts, kps = info["mean_vertices"], info["mean_keypoints"]
         lines.append(f"  [{key}] mean vertices {verts:.0f}, mean keypoints {kps:.1f}")
+    if result.options.per_class:
+        lines += format_losses(result)
     return "\n".join(lines)
+
+
+def format_losses(result: EvaluationResult, below: float = 0.995, intruders: int = 4) -> list[str]:
+    """For each clean BoF row: the classes under `below` mAP, worst first, and who intrudes into their
+    first tier (counted over the class's queries, summed over seeds)."""
+    out = []
+    for r in result.rows:
+        breakdown = r.details.get("per_class")
+        if r.kind != "bof" or r.reference is not None or not breakdown:
+            continue
+        weak = sorted((c for c, v in breakdown.items() if v["mAP"] < below),
+                      key=lambda c: breakdown[c]["mAP"])
+        out.append(f"{r.name}: {len(weak)} of {len(breakdown)} classes below {100 * below:g} % mAP")
+        for c in weak:
+            who = ", ".join(f"{o} {n}" for o, n in list(breakdown[c]["intruders"].items())[:intruders])
+            loss = 100 * (1 - breakdown[c]["mAP"]) / len(breakdown)
+            out.append(f"  {c:<14} {100 * breakdown[c]['mAP']:6.2f}  (-{loss:.2f} of the mean)"
+                       f"  first tier: {who}")
+    return out
 
 
 def to_json(result: EvaluationResult) -> dict[str, Any]:

@@ -9,6 +9,7 @@ import pytest
 
 from app.core.metrics import (
     METRICS,
+    class_breakdown,
     per_query_scores,
     ranked_scores,
     rankings,
@@ -146,3 +147,26 @@ def test_average_precision_agrees_with_scikit_learn() -> None:
         others = np.arange(30) != i
         expected = average_precision_score(labels[others] == labels[i], -d[i, others])
         assert per["mAP"][i] == pytest.approx(expected)
+
+
+def test_class_breakdown_by_hand() -> None:
+    labels = np.array(["a", "a", "a", "b", "b", "c"])
+    # query 0 ranks 3(b) 1(a) 5(c) 2(a) 4(b); query 1 ranks 0 2 ...; query 2 ranks 4(b) 5(c) 0 1 3
+    d = np.full((6, 6), 9.0)
+    np.fill_diagonal(d, 0.0)
+    d[0, [3, 1, 5, 2, 4]] = [1, 2, 3, 4, 5]
+    d[1, [0, 2, 3, 4, 5]] = [1, 2, 3, 4, 5]
+    d[2, [4, 5, 0, 1, 3]] = [1, 2, 3, 4, 5]
+    d[3, [4, 0, 1, 2, 5]] = [1, 2, 3, 4, 5]
+    d[4, [0, 3, 1, 2, 5]] = [1, 2, 3, 4, 5]
+    out = class_breakdown(d, labels)
+    # AP: query 0 finds its relevant at ranks 2, 4 -> (1/2 + 2/4) / 2 = 0.5; query 1 -> 1;
+    # query 2 at ranks 3, 4 -> (1/3 + 2/4) / 2
+    assert out["a"]["mAP"] == pytest.approx((0.5 + 1.0 + (1 / 3 + 2 / 4) / 2) / 3)
+    # first tier (2 results): query 0 -> b, a; query 1 -> a, a; query 2 -> b, c
+    assert out["a"]["intruders"] == {"b": 2, "c": 1}
+    assert list(out["a"]["intruders"]) == ["b", "c"]  # most frequent first
+    # b: query 3 -> 4 first (AP 1, no intruder); query 4 -> 0 then 3 (AP 1/2, intruder a)
+    assert out["b"]["mAP"] == pytest.approx(0.75) and out["b"]["intruders"] == {"a": 1}
+    # c is a class of one: no first tier, AP undefined, left out as psbTable does
+    assert math.isnan(out["c"]["mAP"]) and out["c"]["intruders"] == {}

@@ -217,3 +217,18 @@ def test_seeds_average_the_bof_lines_over_k_means_seeds(folder: Path, tmp_path: 
     assert "mean over 2 k-means seeds" in format_table(both)
     with pytest.raises(EvaluationError, match="--seeds"):
         evaluate(folder, _options(cache, rows=rows, seeds=0))
+
+
+def test_per_class_breakdown_is_in_the_json_and_printed_on_request(folder: Path, tmp_path: Path) -> None:
+    result = evaluate(folder, _options(tmp_path / "cache", rows=("run5",), noise=0.01, per_class=True))
+    main = result.rows[0]
+    breakdown = main.details["per_class"]
+    labels = {line.split(",")[1] for line in (folder / "labels.csv").read_text().splitlines()[1:]}
+    assert set(breakdown) == labels
+    # the per-class means, weighted by class size (equal here), give the line's mAP back
+    assert np.mean([v["mAP"] for v in breakdown.values()]) == pytest.approx(main.scores["mAP"])
+    assert all(other != cls for cls, v in breakdown.items() for other in v["intruders"])
+    table = format_table(result)
+    assert "classes below 99.5 % mAP" in table
+    doc = json.loads(json.dumps(to_json(result)))
+    assert set(doc["rows"][0]["details"]["per_class"]) == labels
