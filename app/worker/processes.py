@@ -6,6 +6,7 @@ import logging
 import multiprocessing as mp
 import os
 import signal
+import socket
 import time
 from multiprocessing.process import BaseProcess
 
@@ -79,6 +80,12 @@ def worker_main(settings_json: str, name: str, stop: StopFlag) -> None:
     Worker(ctx, name).run_forever(stop)  # type: ignore[arg-type]
 
 
+def process_name(prefix: str, slot: int) -> str:
+    """A worker name unique across machines and containers: in each container the parent is often
+    pid 1, so prefix-pid-slot alone repeats (and heartbeats of two workers would share one row)."""
+    return f"{prefix}@{socket.gethostname()}-{os.getpid()}-{slot}"
+
+
 class WorkerPool:
     """The embedded ingestion workers owned by the server's lifespan (or by `shapebag worker`)."""
 
@@ -100,7 +107,7 @@ class WorkerPool:
         saved = {v: os.environ.get(v) for v in THREAD_VARS}
         os.environ.update({v: "1" for v in THREAD_VARS})  # inherited by the spawned interpreter
         try:
-            name = f"{self.prefix}-{os.getpid()}-{slot}"
+            name = process_name(self.prefix, slot)
             p = self._mp.Process(
                 target=worker_main,
                 args=(self.settings.model_dump_json(), name, self._stop),

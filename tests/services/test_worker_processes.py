@@ -67,3 +67,15 @@ def test_dead_embedded_worker_is_replaced_and_slow_queries_time_out(data_dir, co
         runtime.describer.timeout_s = 60
         r = client.post("/search", files={"file": (path.name, path.read_bytes())})
         assert r.status_code == 200 and r.json()["count"] > 0
+
+
+def test_worker_names_differ_across_containers_whose_parents_share_a_pid(monkeypatch):
+    from app.worker import processes
+
+    monkeypatch.setattr(processes.os, "getpid", lambda: 1)  # a container's entry process
+    names = set()
+    for host in ("3f2a9c1d0b7e", "8e1b44c0a9f2"):  # compose gives each container its own hostname
+        monkeypatch.setattr(processes.socket, "gethostname", lambda host=host: host)
+        names |= {processes.process_name("worker", slot) for slot in range(2)}
+    assert len(names) == 4
+    assert processes.process_name("worker", 0) == "worker@8e1b44c0a9f2-1-0"
