@@ -93,6 +93,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     for module in (models, jobs, search, admin, health, web):
         app.include_router(module.router)
+    app.include_router(models.labels_router)
     return app
 
 

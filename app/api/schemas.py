@@ -58,6 +58,15 @@ class ModelsPublic(BaseModel):
     count: int = Field(description="total matching the filters (not just this page)")
 
 
+class LabelCount(BaseModel):
+    label: str
+    models: int = Field(description="models carrying this label, in any status")
+
+
+class LabelsPublic(BaseModel):
+    data: list[LabelCount]
+
+
 class ModelAccepted(BaseModel):
     model_id: int
     job_id: int | None = Field(description="null when the identical content was already stored")

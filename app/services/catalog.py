@@ -22,6 +22,12 @@ def list_models(
         return models_repo.page(conn, label=label, status=status, limit=limit, offset=offset)
 
 
+def labels(ctx: ServiceContext) -> list[tuple[str, int]]:
+    """Every label in use and how many models carry it, by name."""
+    with ctx.db.read() as conn:
+        return models_repo.label_counts(conn)
+
+
 def get_job(ctx: ServiceContext, job_id: int) -> JobRecord:
     with ctx.db.read() as conn:
         job = jobs_repo.get(conn, job_id)

@@ -127,6 +127,15 @@ def ready_ids(conn: sqlite3.Connection) -> list[int]:
     return [r[0] for r in conn.execute("SELECT id FROM models WHERE status = 'ready' ORDER BY id")]
 
 
+def label_counts(conn: sqlite3.Connection) -> list[tuple[str, int]]:
+    """(label, models) for every label in use, by name (the models_label index serves the GROUP BY)."""
+    rows = conn.execute(
+        "SELECT label, COUNT(*) FROM models WHERE label IS NOT NULL AND label != ''"
+        " GROUP BY label ORDER BY label"
+    )
+    return [(str(label), int(n)) for label, n in rows]
+
+
 def count_by_status(conn: sqlite3.Connection) -> dict[str, int]:
     counts = {"queued": 0, "ready": 0, "failed": 0}
     for status, n in conn.execute("SELECT status, COUNT(*) FROM models GROUP BY status"):

@@ -126,3 +126,24 @@ def test_bad_uploads_get_clear_errors_and_change_nothing(data_dir, corpus, tmp_p
         r = client.get(f"/models/{failed_id}/similar")
         assert r.status_code == 409 and r.json()["error"]["code"] == "conflict"
         assert client.get("/jobs/999999").json()["error"]["code"] == "not_found"
+
+
+def test_labels_lists_every_label_in_use_with_its_count(data_dir, corpus):
+    with TestClient(create_app(make_settings(data_dir))) as client:
+        models = client.get("/models", params={"limit": 500}).json()["data"]
+        expected: dict[str, int] = {}
+        for m in models:
+            if m["label"]:
+                expected[m["label"]] = expected.get(m["label"], 0) + 1
+        assert expected  # the seeded collection is labelled
+        body = client.get("/labels").json()
+        assert body["data"] == [{"label": k, "models": v} for k, v in sorted(expected.items())]
+
+        path, _ = corpus.held_out[0]
+        up = _upload(client, path, "brand-new-label")
+        assert up.status_code == 202
+        # a model counts under its label from upload on, whatever its status
+        labels = {item["label"]: item["models"] for item in client.get("/labels").json()["data"]}
+        assert labels["brand-new-label"] == 1 and len(labels) == len(expected) + 1
+        # "labels" is a route of its own, not a model id
+        assert client.get("/models/labels").status_code == 422

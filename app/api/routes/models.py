@@ -15,6 +15,8 @@ from app.api.deps import CtxDep, RuntimeDep
 from app.api.limits import IdPath
 from app.api.schemas import (
     ErrorResponse,
+    LabelCount,
+    LabelsPublic,
     ModelAccepted,
     ModelCreate,
     ModelPublic,
@@ -27,6 +29,7 @@ from app.services import catalog, ingestion, maintenance, search
 from app.services.errors import InvalidInputError
 
 router = APIRouter(prefix="/models", tags=["models"])
+labels_router = APIRouter(prefix="/labels", tags=["models"])
 ERRORS: dict[int | str, dict] = {c: {"model": ErrorResponse} for c in (404, 413, 422, 503)}
 
 UPLOAD_BODY = multipart_body(
@@ -83,6 +86,12 @@ def list_models(
 ) -> ModelsPublic:
     rows, total = catalog.list_models(ctx, label, status, limit, offset)
     return ModelsPublic(data=[ModelPublic.of(m) for m in rows], count=total)
+
+
+@labels_router.get("", response_model=LabelsPublic)
+def list_labels(ctx: CtxDep) -> LabelsPublic:
+    """Every label in use, by name, with its number of models (the web page's filter suggestions)."""
+    return LabelsPublic(data=[LabelCount(label=label, models=n) for label, n in catalog.labels(ctx)])
 
 
 @router.get("/{model_id}", response_model=ModelPublic, responses=ERRORS)

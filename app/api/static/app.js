@@ -219,10 +219,10 @@ async function showSimilar(modelId) {
 }
 
 async function loadLabels() {
-  // labels for the filter suggestions: one large page is plenty for a demo-sized collection
+  // every label in use, for the filter suggestions
   try {
-    const page = await api("/models?limit=500");
-    for (const m of page.data) if (m.label) state.labels.add(m.label);
+    const page = await api("/labels");
+    for (const item of page.data) state.labels.add(item.label);
     updateLabelList();
   } catch (err) { /* the grid reports errors */ }
 }
