@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Literal
 
 from pydantic import BaseModel, Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from app.core.pipeline import DescribeParams
+from app.core.resolution import SUBDIVISIONS
 from app.core.vocabulary import EncodeParams
 
 DEFAULT_ADMIN_TOKEN = "change-me"
@@ -24,8 +24,15 @@ class DescribeSettings(BaseModel):
     m: int = Field(default=DescribeParams.m, ge=4)
     target_vertices: int = Field(default=DescribeParams.target_vertices, ge=0)
     smoothing: int = Field(default=DescribeParams.smoothing, ge=0)
-    subdivision: Literal["midpoint", "loop"] = "midpoint"
+    subdivision: str = DescribeParams.subdivision
     solver: str = "auto"
+
+    @field_validator("subdivision")
+    @classmethod
+    def _known_subdivision(cls, value: str) -> str:
+        if value not in SUBDIVISIONS:
+            raise ValueError(f"must be one of {', '.join(SUBDIVISIONS)}")
+        return value
 
     def params(self) -> DescribeParams:
         return DescribeParams(**self.model_dump())

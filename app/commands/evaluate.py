@@ -6,7 +6,14 @@ import argparse
 from pathlib import Path
 
 from app.cli import CommandError
-from app.services.evaluation import DEFAULT_CACHE, ROW_NAMES, EvaluationError, EvaluationOptions, evaluate
+from app.services.evaluation import (
+    DEFAULT_CACHE,
+    ROW_NAMES,
+    SUBDIVISIONS,
+    EvaluationError,
+    EvaluationOptions,
+    evaluate,
+)
 from app.services.evaluation_report import format_table, write_json
 
 
@@ -33,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="eigenpairs (default %(default)s, the paper's)")
     p.add_argument("--smoothing", type=int, default=EvaluationOptions.smoothing,
                    help="Taubin iterations before the eigen-solve (0: none; default %(default)s)")
-    p.add_argument("--subdivision", choices=("midpoint", "loop"), default=EvaluationOptions.subdivision,
+    p.add_argument("--subdivision", choices=SUBDIVISIONS, default=EvaluationOptions.subdivision,
                    help="how coarse meshes are refined to the canonical resolution (default %(default)s)")
     p.add_argument("--vocabulary", type=Path, metavar="DIR",
                    help="also encode with this frozen vocabulary (centers.npy + vocabulary.json)")

@@ -94,15 +94,23 @@ def per_query_scores(distances: np.ndarray, labels: np.ndarray) -> dict[str, np.
     Row i may come from a different description of shape i than column i (noisy queries against a
     clean database): the diagonal is still left out, only row i's ranking of the others counts.
     """
+    d, labels = _checked(distances, labels)
+    return _per_query(rankings(d), labels)
+
+
+def _checked(distances: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     labels = np.asarray(labels)
     d = np.asarray(distances)
     if labels.ndim != 1 or labels.shape[0] != d.shape[0]:
         raise ValueError(f"labels must be ({d.shape[0]},), got {labels.shape}")
     if labels.shape[0] < 2:
         raise ValueError("retrieval needs at least two shapes")
-    order = rankings(d)  # (N, N-1)
-    relevant = labels[order] == labels[:, None]
-    return relevance_scores(relevant)
+    return d, labels
+
+
+def _per_query(order: np.ndarray, labels: np.ndarray) -> dict[str, np.ndarray]:
+    """(N, N-1) rankings (query left out) and (N,) labels -> {metric: (N,) per-query score}."""
+    return relevance_scores(labels[order] == labels[:, None])
 
 
 def mean_scores(per_query: dict[str, np.ndarray]) -> dict[str, float]:
@@ -136,6 +144,16 @@ def ranked_scores(ranking: np.ndarray, labels: np.ndarray, query_label: object) 
     return {name: float(v[0]) for name, v in relevance_scores(relevant).items()}
 
 
+def scores_and_breakdown(
+    distances: np.ndarray, labels: np.ndarray
+) -> tuple[dict[str, float], dict[str, dict]]:
+    """retrieval_scores and class_breakdown of the same distances, from one ranking."""
+    d, labels = _checked(distances, labels)
+    order = rankings(d)
+    per_query = _per_query(order, labels)
+    return mean_scores(per_query), _breakdown(order, labels, per_query["mAP"])
+
+
 def class_breakdown(distances: np.ndarray, labels: np.ndarray) -> dict[str, dict]:
     """Where a ranking loses: per class, its mean AP and the classes that intrude into its first tier.
 
@@ -143,9 +161,11 @@ def class_breakdown(distances: np.ndarray, labels: np.ndarray) -> dict[str, dict
     -> {class: {"mAP": mean AP of its queries, "intruders": {other class: count}}}, the intruders
        counted over the class's queries in their first C - 1 results, most frequent first.
     """
-    labels = np.asarray(labels)
-    order = rankings(distances)  # (N, N-1)
-    ap = per_query_scores(distances, labels)["mAP"]
+    return scores_and_breakdown(distances, labels)[1]
+
+
+def _breakdown(order: np.ndarray, labels: np.ndarray, ap: np.ndarray) -> dict[str, dict]:
+    """class_breakdown from (N, N-1) rankings and (N,) per-query AP."""
     out: dict[str, dict] = {}
     for cls in sorted(set(labels.tolist())):
         members = np.flatnonzero(labels == cls)

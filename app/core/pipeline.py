@@ -16,7 +16,7 @@ from app.core import hks as hks_mod
 from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import cotangent_laplacian
 from app.core.mesh import Mesh
-from app.core.resolution import normalize_scale, smooth, to_resolution
+from app.core.resolution import SUBDIVISIONS, normalize_scale, smooth, to_resolution
 from app.core.spectrum import smallest_eigenpairs
 
 DESCRIPTION_FORMAT = 1
@@ -33,6 +33,11 @@ class DescribeParams:
     subdivision: str = "midpoint"  # how coarse meshes reach the canonical resolution: midpoint | loop
     solver: str = "auto"  # auto | dense | sparse
     keypoint_filter: KeypointFilter = field(default_factory=KeypointFilter)
+
+    def __post_init__(self) -> None:
+        if self.subdivision not in SUBDIVISIONS:
+            known = ", ".join(SUBDIVISIONS)
+            raise ValueError(f"subdivision must be one of {known}, not {self.subdivision!r}")
 
     def fingerprint(self) -> str:
         """A stable string naming these parameters (cache keys)."""

@@ -22,7 +22,7 @@ from app.core.baselines import D2_BINS, SHAPE_DNA_COUNT, euclidean_distance, l1_
 from app.core.descriptor import RUNS, dimension
 from app.core.keypoints import KeypointFilter
 from app.core.pipeline import DescribeParams, ShapeDescription
-from app.core.resolution import SUBDIVISIONS
+from app.core.resolution import SUBDIVISIONS as SUBDIVISIONS  # the --subdivision choices
 from app.core.vocabulary import EncodeParams, Vocabulary
 from app.core.vocabulary import l1_distance as bof_l1
 from app.services import evaluation_cache as cache_mod
@@ -84,10 +84,13 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
     if unknown:
         raise EvaluationError(f"unknown row(s) {', '.join(unknown)}; choose from {', '.join(ROW_NAMES)}")
     flt = KeypointFilter(enabled=options.keypoint_filter)
-    base = DescribeParams(
-        k=options.k, target_vertices=options.target_vertices, smoothing=options.smoothing,
-        subdivision=options.subdivision, keypoint_filter=flt,
-    )
+    try:
+        base = DescribeParams(
+            k=options.k, target_vertices=options.target_vertices, smoothing=options.smoothing,
+            subdivision=options.subdivision, keypoint_filter=flt,
+        )
+    except ValueError as exc:  # e.g. an unknown subdivision
+        raise EvaluationError(str(exc)) from exc
     rows = []
     for name in options.rows:
         if name in RUNS:
@@ -112,8 +115,6 @@ def evaluate(directory: str | Path, options: EvaluationOptions | None = None) ->
         raise EvaluationError(f"--mode must be 'hard' or 'soft', not {options.mode!r}")
     if options.noise < 0:
         raise EvaluationError("--noise must be >= 0")
-    if options.subdivision not in SUBDIVISIONS:
-        raise EvaluationError(f"--subdivision must be one of {', '.join(SUBDIVISIONS)}")
     if options.seeds < 1:
         raise EvaluationError("--seeds must be at least 1")
 
@@ -187,14 +188,14 @@ def _bof_lines(
 
     k-means seeds alone move mAP by ~0.3 points on SHREC'11, so comparisons finer than that need seeds > 1.
     """
-    per_seed = [_bof_lines_one_seed(row, db, queries, labels, options, options.seed + i)
+    params = EncodeParams(mode=options.mode, keypoints_only=options.keypoints_only)
+    per_seed = [_bof_lines_one_seed(row, db, queries, labels, options, params, options.seed + i)
                 for i in range(options.seeds)]
     lines = [_mean_over_seeds(same) for same in zip(*per_seed, strict=True)]
     by_name = {line.name: line for line in lines}
     for line in lines:  # Δ mAP against the mean clean line, not against one seed's
         line.reference = by_name[line.reference.name] if line.reference is not None else None
     if frozen is not None:  # one vocabulary, no seed
-        params = EncodeParams(mode=options.mode, keypoints_only=options.keypoints_only)
         name = f"{row.name} [frozen {Path(options.vocabulary or '').name}]"
         lines.insert(1, _score_bof(name, row, frozen, db, db, labels, params, time.perf_counter(), lines[0]))
     return lines
@@ -202,9 +203,8 @@ def _bof_lines(
 
 def _bof_lines_one_seed(
     row: Row, db: list[ShapeDescription], queries: list[ShapeDescription] | None, labels: np.ndarray,
-    options: EvaluationOptions, seed: int,
+    options: EvaluationOptions, params: EncodeParams, seed: int,
 ) -> list[RowResult]:
-    params = EncodeParams(mode=options.mode, keypoints_only=options.keypoints_only)
     meta = {"row": row.name}
     t0 = time.perf_counter()
     vocab = Vocabulary.fit(db, size=options.vocabulary_size, run=row.run, seed=seed, metadata=meta)
@@ -244,10 +244,10 @@ def _score_bof(
     db_bof = np.stack([vocab.encode(d, params) for d in db])  # (N, v)
     q_bof = db_bof if queries is db else np.stack([vocab.encode(d, params) for d in queries])
     distances = bof_l1(q_bof, db_bof)  # (N, N)
-    scores = metrics.retrieval_scores(distances, labels)
+    scores, per_class = metrics.scores_and_breakdown(distances, labels)
     return RowResult(name, "bof", scores, dimension(row.run), time.perf_counter() - t0, reference,
                      {"run": row.run, "vocabulary_size": vocab.size, "describe": row.describe.fingerprint(),
-                      "encode": asdict(params), "per_class": metrics.class_breakdown(distances, labels)})
+                      "encode": asdict(params), "per_class": per_class})
 
 
 def _merge_breakdowns(breakdowns: Sequence[dict[str, dict]]) -> dict[str, dict]:

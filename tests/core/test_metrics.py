@@ -14,6 +14,7 @@ from app.core.metrics import (
     ranked_scores,
     rankings,
     retrieval_scores,
+    scores_and_breakdown,
 )
 
 # six shapes, two classes of C = 3: each query has C - 1 = 2 relevant shapes among the other 5
@@ -170,3 +171,14 @@ def test_class_breakdown_by_hand() -> None:
     assert out["b"]["mAP"] == pytest.approx(0.75) and out["b"]["intruders"] == {"a": 1}
     # c is a class of one: no first tier, AP undefined, left out as psbTable does
     assert math.isnan(out["c"]["mAP"]) and out["c"]["intruders"] == {}
+
+
+def test_scores_and_breakdown_agree_with_the_separate_functions() -> None:
+    rng = np.random.default_rng(3)
+    labels = np.repeat(np.array(["a", "b", "c", "d"]), 5)
+    d = rng.random((20, 20))
+    scores, breakdown = scores_and_breakdown(d, labels)
+    assert scores == pytest.approx(retrieval_scores(d, labels))
+    assert breakdown == class_breakdown(d, labels)
+    # equal class sizes: the class means average back to the overall mAP
+    assert np.mean([v["mAP"] for v in breakdown.values()]) == pytest.approx(scores["mAP"])

@@ -85,3 +85,5 @@ def test_fingerprint_names_every_parameter_that_changes_the_description():
     assert a.fingerprint() != DescribeParams(target_vertices=0).fingerprint()
     assert a.fingerprint() != DescribeParams(smoothing=0).fingerprint()
     assert a.fingerprint() != DescribeParams(subdivision="loop").fingerprint()
+    with pytest.raises(ValueError, match="subdivision"):
+        DescribeParams(subdivision="butterfly")

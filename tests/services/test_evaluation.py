@@ -217,6 +217,8 @@ def test_seeds_average_the_bof_lines_over_k_means_seeds(folder: Path, tmp_path: 
     assert "mean over 2 k-means seeds" in format_table(both)
     with pytest.raises(EvaluationError, match="--seeds"):
         evaluate(folder, _options(cache, rows=rows, seeds=0))
+    with pytest.raises(EvaluationError, match="subdivision"):
+        evaluate(folder, _options(cache, rows=rows, subdivision="butterfly"))
 
 
 def test_per_class_breakdown_is_in_the_json_and_printed_on_request(folder: Path, tmp_path: Path) -> None:
