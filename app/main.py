@@ -15,7 +15,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from app.api import errors
 from app.api.deps import Runtime
 from app.api.limits import RefuseEncodedBodies, check_data_dir
-from app.api.routes import admin, health, jobs, models, search, web
+from app.api.routes import admin, health, jobs, labels, models, search, web
 from app.config import Settings
 from app.services import vocabularies
 from app.services.context import ServiceContext, open_context
@@ -91,9 +91,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         )
         return response
 
-    for module in (models, jobs, search, admin, health, web):
+    for module in (models, labels, jobs, search, admin, health, web):
         app.include_router(module.router)
-    app.include_router(models.labels_router)
     return app
 
 

@@ -28,6 +28,14 @@ def labels(ctx: ServiceContext) -> list[tuple[str, int]]:
         return models_repo.label_counts(conn)
 
 
+def get_model(ctx: ServiceContext, model_id: int) -> ModelRecord:
+    with ctx.db.read() as conn:
+        model = models_repo.get(conn, model_id)
+    if model is None:
+        raise NotFoundError(f"no model with id {model_id}")
+    return model
+
+
 def get_job(ctx: ServiceContext, job_id: int) -> JobRecord:
     with ctx.db.read() as conn:
         job = jobs_repo.get(conn, job_id)

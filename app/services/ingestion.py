@@ -11,7 +11,7 @@ from pathlib import Path
 from app.core.mesh import InvalidMeshError, detect_format, load_mesh
 from app.core.pipeline import describe
 from app.services.context import ServiceContext
-from app.services.errors import InvalidInputError, NotFoundError, QueueFullError
+from app.services.errors import InvalidInputError, QueueFullError
 from app.services.vocabularies import load_vocabulary
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
@@ -133,11 +133,3 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
             jobs_repo.mark_done(conn, job.id, timings)
         return timings
     raise RuntimeError("the active vocabulary kept changing during ingestion")
-
-
-def get_model(ctx: ServiceContext, model_id: int) -> ModelRecord:
-    with ctx.db.read() as conn:
-        model = models_repo.get(conn, model_id)
-    if model is None:
-        raise NotFoundError(f"no model with id {model_id}")
-    return model

@@ -166,7 +166,7 @@ def stale_versions(
     version whose rebuild was killed before its swap (inactive, never served) goes with them.
     """
     keep = {new_id} | ({replaced.id} if replaced is not None else set())
-    return [v.id for v in versions if v.id not in keep and not v.active and v.id < new_id]
+    return [v.id for v in versions if v.id not in keep and v.id < new_id]  # > new_id: not ours to judge
 
 
 def remove_version_files(ctx: ServiceContext, vocabulary_ids: list[int]) -> None:

@@ -70,14 +70,10 @@ def get(conn: sqlite3.Connection, vocabulary_id: int) -> VocabularyRecord | None
 
 
 def delete_inactive(conn: sqlite3.Connection, vocabulary_ids: list[int]) -> list[int]:
-    """Delete these versions and their BoF vectors, never the active one; returns the ids deleted."""
-    deleted = []
-    for vid in vocabulary_ids:
-        conn.execute("DELETE FROM bof WHERE vocabulary_id = ? AND"
-                     " EXISTS (SELECT 1 FROM vocabularies WHERE id = ? AND active = 0)", (vid, vid))
-        if conn.execute("DELETE FROM vocabularies WHERE id = ? AND active = 0", (vid,)).rowcount:
-            deleted.append(vid)
-    return deleted
+    """Delete these versions, never the active one (their BoF rows go by ON DELETE CASCADE);
+    returns the ids deleted."""
+    sql = "DELETE FROM vocabularies WHERE id = ? AND active = 0"
+    return [vid for vid in vocabulary_ids if conn.execute(sql, (vid,)).rowcount]
 
 
 def all_versions(conn: sqlite3.Connection) -> list[VocabularyRecord]:

@@ -15,8 +15,6 @@ from app.api.deps import CtxDep, RuntimeDep
 from app.api.limits import IdPath
 from app.api.schemas import (
     ErrorResponse,
-    LabelCount,
-    LabelsPublic,
     ModelAccepted,
     ModelCreate,
     ModelPublic,
@@ -29,7 +27,6 @@ from app.services import catalog, ingestion, maintenance, search
 from app.services.errors import InvalidInputError
 
 router = APIRouter(prefix="/models", tags=["models"])
-labels_router = APIRouter(prefix="/labels", tags=["models"])
 ERRORS: dict[int | str, dict] = {c: {"model": ErrorResponse} for c in (404, 413, 422, 503)}
 
 UPLOAD_BODY = multipart_body(
@@ -88,20 +85,14 @@ def list_models(
     return ModelsPublic(data=[ModelPublic.of(m) for m in rows], count=total)
 
 
-@labels_router.get("", response_model=LabelsPublic)
-def list_labels(ctx: CtxDep) -> LabelsPublic:
-    """Every label in use, by name, with its number of models (the web page's filter suggestions)."""
-    return LabelsPublic(data=[LabelCount(label=label, models=n) for label, n in catalog.labels(ctx)])
-
-
 @router.get("/{model_id}", response_model=ModelPublic, responses=ERRORS)
 def get_model(model_id: IdPath, ctx: CtxDep) -> ModelPublic:
-    return ModelPublic.of(ingestion.get_model(ctx, model_id))
+    return ModelPublic.of(catalog.get_model(ctx, model_id))
 
 
 @router.get("/{model_id}/mesh", responses=ERRORS, response_class=FileResponse)
 def get_mesh(model_id: IdPath, ctx: CtxDep) -> FileResponse:
-    model = ingestion.get_model(ctx, model_id)
+    model = catalog.get_model(ctx, model_id)
     path = ctx.blobs.mesh_path(model.sha256, model.file_type)
     media = mimetypes.guess_type(f"x.{model.file_type}")[0] or "application/octet-stream"
     return FileResponse(path, media_type=media, filename=f"{model.name}.{model.file_type}")
@@ -128,7 +119,7 @@ def similar(
 @router.get("/{model_id}/thumbnail.png", responses=ERRORS, response_class=Response)
 def thumbnail(model_id: IdPath, ctx: CtxDep, size: Annotated[int, Query(ge=32, le=1024)] = 256) -> Response:
     """A server-side rendering of the stored mesh (cached under the data directory)."""
-    path = maintenance.thumbnail_file(ctx, ingestion.get_model(ctx, model_id), size)
+    path = maintenance.thumbnail_file(ctx, catalog.get_model(ctx, model_id), size)
     return Response(
         path.read_bytes(),
         media_type="image/png",
