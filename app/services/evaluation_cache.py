@@ -12,10 +12,9 @@ leaves no half-written entry.
 from __future__ import annotations
 
 import hashlib
-import os
-import tempfile
+import io
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +26,7 @@ from app.core.mesh import InvalidMeshError, Mesh, load_mesh
 from app.core.pipeline import DescribeParams, ShapeDescription, describe
 from app.core.resolution import perturb
 from app.core.spectrum import SpectrumError
+from app.storage.blobs import atomic_write
 
 
 def content_sha256(path: str | Path) -> str:
@@ -126,25 +126,19 @@ def run_task(task: Task) -> str | None:
         mesh = _load_variant(task.path, task.sha, task.variant)
         if task.description_path:
             desc = describe(mesh, task.params)
-            _atomic(Path(task.description_path), desc.save)
+            atomic_write(Path(task.description_path), desc.save)
         if task.d2_path:
             hist = d2_histogram(mesh, seed=0)
-            _atomic(Path(task.d2_path), lambda p: np.save(p, hist, allow_pickle=False))
+            atomic_write(Path(task.d2_path), _npy_bytes(hist))
     except (InvalidMeshError, SpectrumError, ValueError) as exc:
         return f"{task.path}: {exc}"
     return None
 
 
-def _atomic(target: Path, write: Callable[[str], None]) -> None:
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=target.suffix, dir=target.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, target)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+def _npy_bytes(array: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.save(buf, array, allow_pickle=False)
+    return buf.getvalue()
 
 
 def _one_blas_thread() -> None:

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from app.core.metrics import METRICS
+from app.storage.blobs import atomic_write
 
 if TYPE_CHECKING:
     from app.services.evaluation import EvaluationResult
@@ -112,14 +111,8 @@ def to_json(result: EvaluationResult) -> dict[str, Any]:
 
 
 def write_json(result: EvaluationResult, path: str | Path) -> Path:
-    """Write atomically (temporary file, then rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    with os.fdopen(fd, "w") as fh:
-        json.dump(to_json(result), fh, indent=2)
-    os.replace(tmp, path)
-    return path
+    """Write atomically (temporary file, fsync, rename)."""
+    return atomic_write(Path(path), json.dumps(to_json(result), indent=2).encode())
 
 
 def _finite(x: float) -> float | None:
