@@ -27,8 +27,16 @@ from typing import Any
 import faiss as _faiss_typed
 import numpy as np
 
-from app.index.base import IndexFileError, as_batch, as_ids, as_vectors, no_hits, read_faiss
-from app.storage.blobs import atomic_write
+from app.index.base import (
+    IndexFileError,
+    as_batch,
+    as_ids,
+    as_vectors,
+    faiss_hits,
+    no_hits,
+    read_faiss,
+    write_faiss,
+)
 
 # faiss's type stubs lack DirectMap, IVF attributes and the SearchParameters keywords: use it untyped
 faiss: Any = _faiss_typed
@@ -134,12 +142,10 @@ class ApproxL1Index:
             )
         else:
             params = faiss.SearchParameters(sel=sel) if sel else None
-        dist, got = self._index.search(q, k, params=params)
-        dist = np.where(got < 0, np.inf, dist).astype(np.float32)
-        return dist, got.astype(np.int64)
+        return faiss_hits(*self._index.search(q, k, params=params))
 
     def save(self, path: Path) -> None:
-        atomic_write(Path(path), lambda tmp: faiss.write_index(self._index, str(tmp)))
+        write_faiss(self._index, path)
 
     @classmethod
     def load(cls, path: Path) -> ApproxL1Index:

@@ -11,6 +11,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from app.storage.blobs import atomic_write
+
 
 class IndexFileError(RuntimeError):
     """An index file is missing, unreadable or not what we expect."""
@@ -62,6 +64,18 @@ def no_hits(n_queries: int, k: int) -> tuple[np.ndarray, np.ndarray]:
     if k <= 0:
         raise ValueError("k must be positive")
     return np.full((n_queries, k), np.inf, np.float32), np.full((n_queries, k), -1, np.int64)
+
+
+def faiss_hits(dist: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """FAISS search output -> (q, k) float32 distances with inf where no hit (id -1), (q, k) int64 ids."""
+    return np.where(ids < 0, np.inf, dist).astype(np.float32), ids.astype(np.int64)
+
+
+def write_faiss(index, path: Path) -> None:  # index: faiss.Index
+    """Write a FAISS index file atomically (temp file, fsync, rename)."""
+    import faiss
+
+    atomic_write(Path(path), lambda tmp: faiss.write_index(index, str(tmp)))
 
 
 def read_faiss(path: Path):  # -> faiss.Index (faiss is untyped; imported here only when a file is read)

@@ -9,8 +9,16 @@ from pathlib import Path
 import faiss
 import numpy as np
 
-from app.index.base import IndexFileError, as_batch, as_ids, as_vectors, no_hits, read_faiss
-from app.storage.blobs import atomic_write
+from app.index.base import (
+    IndexFileError,
+    as_batch,
+    as_ids,
+    as_vectors,
+    faiss_hits,
+    no_hits,
+    read_faiss,
+    write_faiss,
+)
 
 # below this many (query, vector) pairs one thread wins: waking an OpenMP team costs more than the scan
 # (measured on 2 busy cores: a 1-query search over 40 vectors took ~20 ms with 2 threads, ~0.05 ms with 1)
@@ -65,11 +73,10 @@ class FaissL1Index:
             params = faiss.SearchParameters(sel=faiss.IDSelectorBatch(as_ids(allowed_ids)))  # type: ignore[call-arg]
         with _single_thread_if(len(q) * self.count <= SINGLE_THREAD_WORK):
             dist, ids = self._index.search(q, k, params=params)
-        dist = np.where(ids < 0, np.inf, dist).astype(np.float32)
-        return dist, ids.astype(np.int64)
+        return faiss_hits(dist, ids)
 
     def save(self, path: Path) -> None:
-        atomic_write(Path(path), lambda tmp: faiss.write_index(self._index, str(tmp)))
+        write_faiss(self._index, path)
 
     @classmethod
     def load(cls, path: Path) -> FaissL1Index:
