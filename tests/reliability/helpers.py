@@ -134,6 +134,18 @@ def env_for(data_dir: Path, **extra: str) -> dict[str, str]:
     return env
 
 
+def refused_start(env: dict[str, str]) -> tuple[int, list[str]]:
+    """Run `shapebag serve` where it must refuse to start: (exit code, stderr lines)."""
+    p = subprocess.run(
+        [sys.executable, "-m", "app.cli", "serve", "--port", "1"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    return p.returncode, p.stderr.strip().splitlines()
+
+
 def start_server(data_dir: Path, log: Path, **extra: str) -> tuple[Proc, str]:
     port = free_port()
     proc = Proc(["serve", "--port", str(port)], env_for(data_dir, **extra), log)

@@ -6,8 +6,6 @@ from __future__ import annotations
 import inspect
 import re
 import sqlite3
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -20,7 +18,7 @@ from app.services import vocabularies
 from app.services.context import open_context
 from app.storage import vocabularies as vocab_repo
 from tests.conftest import make_settings, wait_job
-from tests.reliability.helpers import env_for
+from tests.reliability.helpers import env_for, refused_start
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -55,14 +53,8 @@ def test_serve_without_a_token_exits_with_one_line(tmp_path):
     env = env_for(tmp_path / "d")
     env.pop("SHAPEBAG_ADMIN_TOKEN")
     env.pop("SHAPEBAG_DEV_MODE", None)
-    p = subprocess.run(
-        [sys.executable, "-m", "app.cli", "serve", "--port", "1"],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1 and "ADMIN_TOKEN" in p.stderr
+    code, lines = refused_start(env)
+    assert code == 2 and len(lines) == 1 and "ADMIN_TOKEN" in lines[0], lines
 
 
 def test_cors_is_closed_by_default_and_open_only_to_configured_origins(tmp_path):

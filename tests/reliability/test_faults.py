@@ -26,7 +26,15 @@ from app.storage import models as models_repo
 from app.storage import vocabularies as vocab_repo
 from app.worker.runner import Worker
 from tests.conftest import make_settings, wait_for
-from tests.reliability.helpers import MULTIPART_HEADERS, Proc, env_for, multipart, snapshot, start_server
+from tests.reliability.helpers import (
+    MULTIPART_HEADERS,
+    Proc,
+    env_for,
+    multipart,
+    refused_start,
+    snapshot,
+    start_server,
+)
 
 pytestmark = pytest.mark.slow
 TOKEN = {"X-Admin-Token": "reliability-secret"}
@@ -236,15 +244,8 @@ def test_unwritable_data_dir_refuses_to_start_with_one_line(tmp_path):
     blocker = tmp_path / "not-a-directory"
     blocker.write_text("a regular file where the data directory's parent should be")
     env = env_for(blocker / "data")
-    p = subprocess.run(
-        [sys.executable, "-m", "app.cli", "serve", "--port", "1"],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    lines = p.stderr.strip().splitlines()
-    assert p.returncode == 2 and len(lines) == 1 and "cannot use the data directory" in lines[0], p.stderr
+    code, lines = refused_start(env)
+    assert code == 2 and len(lines) == 1 and "cannot use the data directory" in lines[0], lines
 
 
 @pytest.mark.parametrize(("code", "status"), [(errno.ENOSPC, 507), (errno.EROFS, 503)])
