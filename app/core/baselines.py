@@ -85,9 +85,3 @@ def d2_histogram(
     ratio = np.minimum(dist / mean, np.nextafter(max_ratio, 0.0))
     hist, _ = np.histogram(ratio, bins=bins, range=(0.0, max_ratio))
     return hist / hist.sum()
-
-
-def l1_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(n, b), (q, b) -> (n, q) L1 distances between histograms (D2)."""
-    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
-    return np.abs(a[:, None, :] - b[None, :, :]).sum(axis=2)

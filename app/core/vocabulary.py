@@ -178,8 +178,10 @@ def _squared_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def l1_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """L1 (Manhattan) distances between BoF vectors: (n, v), (q, v) -> (n, q); eq. 9 with ‖·‖₁."""
-    return np.abs(np.asarray(a)[:, None, :] - np.asarray(b)[None, :, :]).sum(axis=2)
+    """L1 (Manhattan) distances between BoF vectors or histograms (the D2 baseline's too):
+    (n, v), (q, v) -> (n, q); eq. 9 with ‖·‖₁."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    return np.abs(a[:, None, :] - b[None, :, :]).sum(axis=2)
 
 
 def params_dict(params: EncodeParams) -> dict:

@@ -18,13 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from app.core import metrics
-from app.core.baselines import D2_BINS, SHAPE_DNA_COUNT, euclidean_distance, l1_distance, shape_dna
+from app.core.baselines import D2_BINS, SHAPE_DNA_COUNT, euclidean_distance, shape_dna
 from app.core.descriptor import RUNS, dimension
 from app.core.keypoints import KeypointFilter
 from app.core.pipeline import DescribeParams, ShapeDescription
 from app.core.resolution import SUBDIVISIONS as SUBDIVISIONS  # the --subdivision choices
-from app.core.vocabulary import EncodeParams, Vocabulary
-from app.core.vocabulary import l1_distance as bof_l1
+from app.core.vocabulary import EncodeParams, Vocabulary, l1_distance
 from app.services import evaluation_cache as cache_mod
 from app.services.evaluation_report import RowResult
 
@@ -243,7 +242,7 @@ def _score_bof(
     """Encode database and queries with `vocab`; row i of the distances = query i vs the database."""
     db_bof = np.stack([vocab.encode(d, params) for d in db])  # (N, v)
     q_bof = db_bof if queries is db else np.stack([vocab.encode(d, params) for d in queries])
-    distances = bof_l1(q_bof, db_bof)  # (N, N)
+    distances = l1_distance(q_bof, db_bof)  # (N, N)
     scores, per_class = metrics.scores_and_breakdown(distances, labels)
     return RowResult(name, "bof", scores, dimension(row.run), time.perf_counter() - t0, reference,
                      {"run": row.run, "vocabulary_size": vocab.size, "describe": row.describe.fingerprint(),

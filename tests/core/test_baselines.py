@@ -9,11 +9,11 @@ import trimesh
 from app.core.baselines import (
     d2_histogram,
     euclidean_distance,
-    l1_distance,
     shape_dna,
     shape_dna_of_mesh,
 )
 from app.core.mesh import Mesh
+from app.core.vocabulary import l1_distance
 
 
 def _mesh(tm: trimesh.Trimesh) -> Mesh:
