@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from dataclasses import dataclass
@@ -12,6 +11,7 @@ from app.core.mesh import InvalidMeshError, detect_format, load_mesh
 from app.core.pipeline import describe
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError, QueueFullError
+from app.services.metadata import check_metadata
 from app.services.vocabularies import load_vocabulary
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
@@ -28,18 +28,6 @@ class Submitted:
     model: ModelRecord
     job_id: int | None  # None: identical content was already there, no new work
     created: bool
-
-
-def parse_metadata(raw: str | None) -> dict:
-    if raw is None or raw.strip() == "":
-        return {}
-    try:
-        value = json.loads(raw)
-    except json.JSONDecodeError as exc:
-        raise InvalidInputError(f"metadata is not valid JSON: {exc.msg} at position {exc.pos}") from exc
-    if not isinstance(value, dict):
-        raise InvalidInputError("metadata must be a JSON object")
-    return value
 
 
 def submit(
@@ -61,6 +49,7 @@ def submit(
         raise InvalidInputError(str(exc)) from exc
     if not data:
         raise InvalidInputError("the file is empty")
+    metadata = check_metadata(metadata or {})  # a row that could not serialise back must never be stored
     digest = sha256_hex(data)
     with ctx.db.read() as conn:
         existing = models_repo.get_by_sha256(conn, digest)
@@ -80,7 +69,7 @@ def submit(
             conn,
             name=name or Path(filename).stem,
             label=label or None,
-            metadata=metadata or {},
+            metadata=metadata,
             sha256=digest,
             file_type=file_type,
             size_bytes=len(data),

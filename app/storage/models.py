@@ -48,7 +48,7 @@ def insert(
         "INSERT INTO models (name, label, metadata, sha256, file_type, size_bytes, status,"
         " created_at, updated_at)"
         " VALUES (?, ?, ?, ?, ?, ?, 'queued', ?, ?)",
-        (name, label, json.dumps(metadata), sha256, file_type, size_bytes, now, now),
+        (name, label, json.dumps(metadata, allow_nan=False), sha256, file_type, size_bytes, now, now),
     )
     return int(cur.lastrowid or 0)
 

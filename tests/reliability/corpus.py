@@ -238,3 +238,52 @@ def gzip_body_bomb(size: int = 512 << 20) -> bytes:
     out = [comp.compress(chunk) for _ in range(size >> 20)]
     out.append(comp.flush())
     return b"".join(out)
+
+
+def bad_metadata() -> list[tuple[str, str]]:
+    """(case, raw `metadata` field) that standard JSON cannot round-trip or that pass the caps.
+
+    Each class is generated over several variants (where it sits, how deep, how long), so a fix for
+    only the tester's example would not pass.
+    """
+    cases: list[tuple[str, str]] = []
+    for surrogate in ("\\ud800", "\\udfff", "\\udbff"):  # high, low, last high
+        cases += [
+            (f"surrogate-value-{surrogate[2:]}", f'{{"a": "x{surrogate}y"}}'),
+            (f"surrogate-key-{surrogate[2:]}", f'{{"{surrogate}": 1}}'),
+            (f"surrogate-nested-{surrogate[2:]}", f'{{"a": [{{"b": ["{surrogate}"]}}]}}'),
+        ]
+    for constant in ("NaN", "Infinity", "-Infinity", "1e999", "-1e400"):
+        cases += [
+            (f"nonfinite-{constant}", f'{{"a": {constant}}}'),
+            (f"nonfinite-in-list-{constant}", f'{{"a": [1, {constant}]}}'),
+        ]
+    for depth in (17, 64, 255, 256, 1000, 100_000):
+        cases += [
+            (f"deep-objects-{depth}", '{"a": ' * depth + "1" + "}" * depth + "}"),
+            (f"deep-arrays-{depth}", '{"a": ' + "[" * depth + "]" * depth + "}"),
+        ]
+    for digits in (20, 40, 4300, 5000):
+        cases += [
+            (f"big-int-{digits}", f'{{"a": {"9" * digits}}}'),
+            (f"big-negative-int-{digits}", f'{{"a": -{"9" * digits}}}'),
+        ]
+    cases += [
+        ("int-just-over-int64", f'{{"a": {2**63}}}'),
+        ("duplicate-key", '{"a": 1, "a": 2}'),
+        ("too-long", '{"a": "' + "x" * 20_000 + '"}'),
+        ("not-an-object", "[1, 2]"),
+        ("not-json", "{a: 1}"),
+        ("trailing-garbage", '{"a": 1} x'),
+    ]
+    return cases
+
+
+def good_metadata() -> list[str]:
+    """Edge cases that are standard JSON within the caps: accepted, stored, served back unchanged."""
+    nested = '{"a": ' * 15 + "1" + "}" * 15
+    return [
+        f'{{"max": {2**63 - 1}, "min": {-(2**63)}, "pi": 3.14159, "tiny": 1e-300}}',
+        '{"text": "caf\\u00e9 \\ud83d\\ude00 \\u4e2d", "empty": "", "null": null, "list": [true, false]}',
+        f'{{"deep": {nested}}}',
+    ]

@@ -23,7 +23,7 @@ from app.api.schemas import (
     SearchResponse,
 )
 from app.api.uploads import multipart_body, read_form
-from app.services import catalog, ingestion, maintenance, search
+from app.services import catalog, ingestion, maintenance, metadata, search
 from app.services.errors import InvalidInputError
 
 router = APIRouter(prefix="/models", tags=["models"])
@@ -54,7 +54,7 @@ async def upload_model(request: Request, runtime: RuntimeDep) -> JSONResponse:
         fields = ModelCreate(
             name=form.fields.get("name") or None,
             label=form.fields.get("label") or None,
-            metadata=ingestion.parse_metadata(form.fields.get("metadata")),
+            metadata=metadata.parse_metadata(form.fields.get("metadata")),
         )
     except ValidationError as exc:
         first = exc.errors()[0]
