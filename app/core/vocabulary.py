@@ -10,15 +10,18 @@ import json
 import os
 import tempfile
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 from sklearn.cluster import KMeans
 
+from app.core.baselines import SHAPE_DNA_COUNT
 from app.core.descriptor import DEFAULT_RUN, dimension, select
+from app.core.fusion import DEFAULT_WEIGHT, FusionScales, dna_vector, fit_scales, fuse
 from app.core.pipeline import ShapeDescription
+from app.core.spectrum import first_nonzero
 
 VOCABULARY_FORMAT = 1
 
@@ -32,6 +35,8 @@ class EncodeParams:
     keypoints_only : integrate over the filtered keypoints instead of all vertices (eq. 8)
     area_weighted  : weight each vertex by its area (eq. 7 as an integral) instead of 1 (eq. 8)
     normalize      : divide F by the total weight, so F does not depend on the vertex count
+    fusion         : append the scaled Shape-DNA (app.core.fusion) when the vocabulary has fusion
+                     scales; a vocabulary without them (older ones) always gives the pure BoF
     """
 
     mode: str = "hard"
@@ -39,6 +44,7 @@ class EncodeParams:
     keypoints_only: bool = False
     area_weighted: bool = False
     normalize: bool = True
+    fusion: bool = True
 
 
 @dataclass(frozen=True)
@@ -52,7 +58,40 @@ class Vocabulary:
 
     @property
     def size(self) -> int:
+        """v, the number of words (the BoF part of a vector)."""
         return int(self.centers.shape[0])
+
+    @property
+    def fusion(self) -> FusionScales | None:
+        """The Shape-DNA fusion scales fixed when this vocabulary was made, if any."""
+        raw = self.metadata.get("fusion")
+        return FusionScales.from_dict(raw) if raw else None
+
+    def fused(self, params: EncodeParams | None = None) -> bool:
+        """Whether encode() appends the Shape-DNA under `params`."""
+        return (params or EncodeParams()).fusion and self.fusion is not None
+
+    def dimension(self, params: EncodeParams | None = None) -> int:
+        """Length of the vectors encode() gives under `params`: v, or v + c when fused (index size)."""
+        scales = self.fusion
+        return self.size + (scales.count if scales is not None and self.fused(params) else 0)
+
+    def with_fusion(
+        self, descriptions: Sequence[ShapeDescription], params: EncodeParams | None = None,
+        weight: float = DEFAULT_WEIGHT,
+    ) -> Vocabulary:
+        """This vocabulary plus fusion scales fit on `descriptions` (its training shapes), their BoF
+        encoded with `params`: the scales belong to the vocabulary, so stored vectors stay comparable."""
+        params = replace(params or EncodeParams(), fusion=False)
+        if len(descriptions) < 2:
+            raise ValueError("fusion scales need at least 2 training shapes")
+        # c: as many eigenvalues as every training shape has (SHAPE_DNA_COUNT unless k is tiny)
+        available = min(len(d.eigenvalues) - first_nonzero(np.sort(d.eigenvalues)) for d in descriptions)
+        count = min(SHAPE_DNA_COUNT, available)
+        bofs = np.stack([self.encode(d, params) for d in descriptions])  # (N, v)
+        dnas = np.stack([dna_vector(d, count) for d in descriptions])  # (N, c)
+        scales = fit_scales(bofs, dnas, weight)
+        return replace(self, metadata=dict(self.metadata, fusion=scales.to_dict()))
 
     @classmethod
     def fit(
@@ -98,7 +137,17 @@ class Vocabulary:
         return cls(centers=centers, run=run, sigma=sigma, metadata=meta)
 
     def encode(self, description: ShapeDescription, params: EncodeParams | None = None) -> np.ndarray:
-        """(v,) float32 BoF vector F(X) of one shape."""
+        """(dimension(params),) float32: the BoF F(X) (v,), fused with the Shape-DNA (v + c,) when
+        the vocabulary has fusion scales and params.fusion is on."""
+        params = params or EncodeParams()
+        bof = self.bof(description, params)
+        scales = self.fusion
+        if scales is None or not params.fusion:
+            return bof
+        return fuse(bof, dna_vector(description, scales.count), scales)
+
+    def bof(self, description: ShapeDescription, params: EncodeParams | None = None) -> np.ndarray:
+        """(v,) float32 BoF vector F(X) of one shape (eqs. 7-8)."""
         params = params or EncodeParams()
         p = select(description.hks, self.run)  # (n, d)
         weights = description.weights.astype(np.float64) if params.area_weighted else np.ones(len(p))
@@ -150,6 +199,8 @@ class Vocabulary:
         expected = (meta["size"], dimension(meta["run"]))
         if centers.shape != expected:
             raise ValueError(f"vocabulary at {directory} is inconsistent: centers {centers.shape}")
+        if meta.get("fusion"):
+            FusionScales.from_dict(meta["fusion"])  # a broken entry fails here, not at the first query
         return cls(centers=centers, run=meta["run"], sigma=float(meta["sigma"]), metadata=meta)
 
     def describe_meta(self) -> dict:

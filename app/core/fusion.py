@@ -1,0 +1,105 @@
+"""BoF + Shape-DNA fusion: one vector whose L1 distance is the fused distance.
+
+The eigenvalues of every shape are computed anyway (the HKS needs them), so the beginning of the
+spectrum (Shape-DNA, app.core.baselines) comes for free. The two distances live on different scales,
+so each is divided by a scale fixed once, at vocabulary time, from the training shapes: the median
+pairwise L1 distance of that part. With
+
+    fuse(bof, dna) = [bof / s_bof,  w · dna / s_dna]        (v + c,)
+
+the L1 distance of two fused vectors is L1(bof) / s_bof + w · L1(dna) / s_dna: an L1 index (FAISS
+METRIC_L1) ranks by the fused distance with no re-ranking step, and a vocabulary that stores its
+scales keeps every stored vector comparable with every later query.
+
+Shape-DNA is compared with L1 here (Reuter used L2): the index has one metric, and on the normalised
+λ_i·A/i every entry has the same order of magnitude, so L1 weighs them alike too.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from app.core.baselines import SHAPE_DNA_COUNT, shape_dna
+from app.core.pipeline import ShapeDescription
+
+DEFAULT_WEIGHT = 1.0  # w: BoF + 1.0 × DNA, each over its median (issue 11's held-out measurements)
+MAX_PAIRS = 200_000  # above this many pairs, fit_scales draws this many (seeded) instead of all
+
+
+def dna_vector(description: ShapeDescription, count: int = SHAPE_DNA_COUNT) -> np.ndarray:
+    """(count,) float64 Shape-DNA λ_i / i of a description (its eigenvalues belong to the unit-area
+    mesh, so the area factor is 1 and the vector does not depend on the mesh's scale)."""
+    return shape_dna(description.eigenvalues, area=1.0, count=count)
+
+
+@dataclass(frozen=True)
+class FusionScales:
+    """Fixed at vocabulary time, stored with it.
+
+    bof    : s_bof, median pairwise L1 distance of the training shapes' BoF vectors
+    dna    : s_dna, the same for their Shape-DNA vectors
+    weight : w, the DNA part's weight in the fused distance
+    count  : c, Shape-DNA length (eigenvalues used)
+    """
+
+    bof: float
+    dna: float
+    weight: float
+    count: int = SHAPE_DNA_COUNT
+
+    def __post_init__(self) -> None:
+        if not (self.bof > 0 and self.dna > 0 and self.weight >= 0 and self.count >= 1):
+            raise ValueError(f"fusion scales must be positive (weight >= 0, count >= 1): {self}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> FusionScales:
+        return cls(
+            bof=float(d["bof"]), dna=float(d["dna"]), weight=float(d["weight"]),
+            count=int(d.get("count", SHAPE_DNA_COUNT)),
+        )
+
+
+def pairwise_l1(x: np.ndarray, max_pairs: int = MAX_PAIRS, seed: int = 0) -> np.ndarray:
+    """(N, d) -> L1 distances over the pairs i < j, or over a seeded sample of `max_pairs` pairs
+    (i != j) when there are more, so the result is deterministic."""
+    x = np.asarray(x, dtype=np.float64)
+    n = x.shape[0]
+    if n < 2:
+        raise ValueError(f"a scale needs at least 2 shapes, got {n}")
+    if n * (n - 1) // 2 <= max_pairs:
+        i, j = np.triu_indices(n, k=1)
+    else:
+        rng = np.random.default_rng(seed)
+        i = rng.integers(0, n, max_pairs)
+        j = (i + rng.integers(1, n, max_pairs)) % n  # never i: no zero self-distances in the median
+    return np.abs(x[i] - x[j]).sum(axis=1)
+
+
+def typical_distance(x: np.ndarray) -> float:
+    """(N, d) -> median pairwise L1 distance; its mean if the median is 0 (most pairs equal), else 1."""
+    d = pairwise_l1(x)
+    return float(np.median(d)) or float(d.mean()) or 1.0
+
+
+def fit_scales(bofs: np.ndarray, dnas: np.ndarray, weight: float = DEFAULT_WEIGHT) -> FusionScales:
+    """bofs (N, v), dnas (N, c) of the training shapes -> their scales (median pairwise L1 each)."""
+    bofs, dnas = np.asarray(bofs), np.asarray(dnas)
+    if bofs.ndim != 2 or dnas.ndim != 2 or bofs.shape[0] != dnas.shape[0]:
+        raise ValueError(f"bofs (N, v) and dnas (N, c) must pair up, got {bofs.shape} and {dnas.shape}")
+    return FusionScales(
+        bof=typical_distance(bofs), dna=typical_distance(dnas), weight=float(weight), count=int(dnas.shape[1])
+    )
+
+
+def fuse(bof: np.ndarray, dna: np.ndarray, scales: FusionScales) -> np.ndarray:
+    """bof (..., v), dna (..., c) -> (..., v + c) float32 [bof / s_bof, w · dna / s_dna]."""
+    bof, dna = np.asarray(bof, dtype=np.float64), np.asarray(dna, dtype=np.float64)
+    if dna.shape[-1] != scales.count:
+        raise ValueError(f"Shape-DNA has {dna.shape[-1]} entries, the scales were fit on {scales.count}")
+    parts = (bof / scales.bof, scales.weight * dna / scales.dna)
+    return np.concatenate(parts, axis=-1).astype(np.float32)
