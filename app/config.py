@@ -45,6 +45,7 @@ class EncodeSettings(BaseModel):
     sigma_scale: float = 1.0
     keypoints_only: bool = False
     area_weighted: bool = False
+    fusion: bool = True  # append the scaled Shape-DNA when the vocabulary has fusion scales (app.core.fusion)
 
     def params(self) -> EncodeParams:
         return EncodeParams(**self.model_dump())  # normalize keeps its default (True)
