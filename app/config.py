@@ -58,9 +58,14 @@ class Settings(BaseSettings):
     host: str = "127.0.0.1"
     port: int = 8000
     workers: int = Field(default_factory=lambda: os.cpu_count() or 1, ge=0)  # embedded ingestion processes
-    search_processes: int = Field(default=1, ge=1)  # pool describing query meshes
+    search_processes: int = Field(default=2, ge=1)  # pool describing query meshes, one request each
+    search_queue: int = Field(default=8, ge=0)  # requests waiting for a busy pool before 503
+    worker_memory_mb: int = Field(default=4096, ge=0)  # RLIMIT_AS of worker and pool processes; 0: none
+    upload_timeout_s: float = Field(default=30.0, gt=0)  # no body bytes for this long: 408
+    max_concurrent_uploads: int = Field(default=32, ge=1)  # request bodies read at once; more: 503
     warm_up: bool = True  # start the query pool at startup, so the first search does not pay for it
     admin_token: str = DEFAULT_ADMIN_TOKEN
+    api_token: str = ""  # set: POST /models and DELETE /models/{id} need it (or the admin token)
     dev_mode: bool = False
     log_level: str = "INFO"  # of the worker processes
     cors_origins: list[str] = []  # closed by default
