@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Annotated
 
 from fastapi import Path as PathParam
+from fastapi import Query
 
 from app.api.uploads import UploadForm
 from app.core.mesh import InvalidMeshError, detect_format
@@ -131,3 +132,6 @@ def check_data_dir(data_dir: Path) -> None:
 
 # ids are SQLite INTEGERs: a larger number is a 422 from validation, not an OverflowError (500) in the driver
 IdPath = Annotated[int, PathParam(ge=1, le=2**63 - 1, description="a model or job id")]
+# a page offset beyond any real collection; unbounded, 2**64 overflowed the driver (500)
+MAX_OFFSET = 10**9
+OffsetQuery = Annotated[int, Query(ge=0, le=MAX_OFFSET, description="models to skip")]

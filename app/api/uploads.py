@@ -61,6 +61,8 @@ async def read_form(request: Request, max_bytes: int) -> UploadForm:
         _, disp = parse_options_header(state["headers"].get(b"content-disposition", b""))
         name = disp.get(b"name", b"").decode("utf-8", "replace")
         content = b"".join(parts)
+        if name in form.files or name in form.fields:  # the last one would silently win
+            raise InvalidInputError(f"the form field {name[:100]!r} appears more than once")
         if b"filename" in disp:
             form.files[name] = (disp[b"filename"].decode("utf-8", "replace"), content)
         else:

@@ -287,3 +287,28 @@ def good_metadata() -> list[str]:
         '{"text": "caf\\u00e9 \\ud83d\\ude00 \\u4e2d", "empty": "", "null": null, "list": [true, false]}',
         f'{{"deep": {nested}}}',
     ]
+
+
+def duplicate_field_bodies(boundary: str, good: bytes) -> list[tuple[str, bytes]]:
+    """(case, multipart body) where one field appears twice: each of file, name, label, metadata, k,
+    twice in a row or apart, with the same or different values (the last must not silently win)."""
+
+    def part(name: str, value: bytes, filename: str | None = None) -> bytes:
+        disp = f'form-data; name="{name}"' + (f'; filename="{filename}"' if filename else "")
+        return f"--{boundary}\r\nContent-Disposition: {disp}\r\n\r\n".encode() + value + b"\r\n"
+
+    file_part = part("file", good, "a.obj")
+    cases = [
+        ("file-twice", file_part + part("file", good + b"\n", "b.obj")),
+        ("file-twice-same", file_part + file_part),
+        ("file-as-text-too", part("file", b"text") + file_part),
+    ]
+    for name, a, b in (
+        ("name", b"a", b"b"),
+        ("label", b"x", b"y"),
+        ("metadata", b"{}", b'{"a": 1}'),
+        ("k", b"3", b"4"),
+    ):
+        cases.append((f"{name}-twice", part(name, a) + part(name, b) + file_part))
+        cases.append((f"{name}-apart", part(name, a) + file_part + part(name, a)))
+    return [(case, body + f"--{boundary}--\r\n".encode()) for case, body in cases]

@@ -79,7 +79,7 @@ def list_models(
     label: str | None = None,
     status: str | None = Query(None, description="queued | ready | failed"),
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: limits.OffsetQuery = 0,
 ) -> ModelsPublic:
     rows, total = catalog.list_models(ctx, label, status, limit, offset)
     return ModelsPublic(data=[ModelPublic.of(m) for m in rows], count=total)

@@ -7,6 +7,7 @@ so the results read like the paper's Figure 1 (query on the left, ranked answers
 
 from __future__ import annotations
 
+import functools
 import mimetypes
 from pathlib import Path
 
@@ -34,12 +35,17 @@ def index() -> FileResponse:
     return FileResponse(page, media_type="text/html", headers={"Cache-Control": "no-cache"})
 
 
+@functools.cache
+def _static_names() -> frozenset[str]:
+    return frozenset(p.name for p in STATIC_DIR.iterdir() if p.is_file())
+
+
 @router.get("/static/{name}", include_in_schema=False)
 def static(name: str) -> FileResponse:
     """One flat directory of assets; anything not in it (or any path trick) is a 404."""
-    path = (STATIC_DIR / name).resolve()
-    if path.parent != STATIC_DIR or not path.is_file():
-        raise NotFoundError(f"no static file {name!r}")
+    if name not in _static_names():  # only names listed from the directory: no NUL, no path tricks
+        raise NotFoundError(f"no static file {name[:100]!r}")
+    path = STATIC_DIR / name
     media = mimetypes.guess_type(path.name)[0] or "application/octet-stream"
     return FileResponse(path, media_type=media, headers={"Cache-Control": "no-cache"})
 
