@@ -114,7 +114,7 @@ class SearchResponse(BaseModel):
 class VocabularyRebuild(BaseModel):
     size: int = Field(64, ge=2, le=4096, description="number of geometric words")
     run: str = Field("run5", description="descriptor selection (Table 1 run1..run5)")
-    seed: int = Field(0, ge=0, lt=2**32, description="k-means seed (NumPy seeds are 32-bit)")
+    seed: int = Field(default=0, ge=0, lt=2**32, description="k-means seed (NumPy seeds are 32-bit)")
 
 
 class VocabularyPublic(BaseModel):
