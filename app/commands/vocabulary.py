@@ -39,6 +39,11 @@ def _fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size", type=int, default=64, help="number of words (default 64)")
     p.add_argument("--run", default="run5", help="descriptor selection, Table 1 (default run5)")
     p.add_argument("--seed", type=int, default=0, help="k-means seed")
+    p.add_argument(
+        "--fusion-weight", type=float, default=None,
+        help="weight w of the Shape-DNA in the fused distance BoF/s_bof + w·DNA/s_dna, fixed with the "
+        "vocabulary (default: app.core.fusion.DEFAULT_WEIGHT)",
+    )
 
 
 def run_fit(args: argparse.Namespace) -> int:
@@ -47,6 +52,7 @@ def run_fit(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
+    from app.core.fusion import DEFAULT_WEIGHT
     from app.core.vocabulary import Vocabulary
     from app.datasets.folder import DatasetError, read_labelled_folder
     from app.services.query_pool import describe_bytes
@@ -83,14 +89,20 @@ def run_fit(args: argparse.Namespace) -> int:
         "command": f"shapebag vocabulary fit {args.directory} --size {args.size} --run {args.run} "
         f"--seed {args.seed}",
     }
+    weight = DEFAULT_WEIGHT if args.fusion_weight is None else args.fusion_weight
+    meta["command"] += f" --fusion-weight {weight}"
     try:
         vocab = Vocabulary.fit(descriptions, size=args.size, run=args.run, seed=args.seed, metadata=meta)
+        # the fusion scales: BoF under the encode settings in force, Shape-DNA, of these same shapes
+        vocab = vocab.with_fusion(descriptions, settings.encode.params(), weight)
     except ValueError as exc:
         raise CommandError(str(exc)) from exc
     vocab.save(args.out)
+    s = vocab.fusion
+    fused = f"; fusion scales BoF {s.bof:.4g}, Shape-DNA {s.dna:.4g} ({s.count}), w {s.weight:g}" if s else ""
     print(
         f"saved {vocab.size} words ({vocab.run}, trained on {vocab.metadata['trained_on_descriptors']} "
-        f"descriptors of {len(descriptions)} meshes) to {args.out}"
+        f"descriptors of {len(descriptions)} meshes) to {args.out}{fused}"
     )
     return 0
 
@@ -112,7 +124,10 @@ def run_rebuild(args: argparse.Namespace) -> int:
             pending.id
             if pending
             else jobs_repo.enqueue(
-                conn, "rebuild_vocabulary", payload={"size": args.size, "run": args.run, "seed": args.seed}
+                conn, "rebuild_vocabulary",
+                payload={
+                    "size": args.size, "run": args.run, "seed": args.seed, "fusion_weight": args.fusion_weight
+                },
             )
         )
     print(f"vocabulary rebuild: job {job_id}")
@@ -145,8 +160,10 @@ def run_show(args: argparse.Namespace) -> int:
         return 0
     for v in versions:
         mark = "*" if v.active else " "
+        fusion = v.metadata.get("fusion")
+        fused = f" + Shape-DNA ({fusion['count']} eigenvalues, weight {fusion['weight']:g})" if fusion else ""
         print(
-            f"{mark} v{v.id}: {v.size} words, {v.run}, trained on {v.trained_on} descriptors, "
+            f"{mark} v{v.id}: {v.size} words{fused}, {v.run}, trained on {v.trained_on} descriptors, "
             f"created {v.created_at}, {v.path}"
         )
     return 0

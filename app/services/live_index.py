@@ -19,7 +19,7 @@ from app.core.vocabulary import Vocabulary
 from app.index import IndexFileError, ShapeIndex, load_index, new_index
 from app.services.context import ServiceContext
 from app.services.errors import NotReadyError
-from app.services.vocabularies import encode_missing, load_vocabulary
+from app.services.vocabularies import encode_missing, load_vocabulary, reencode_version
 from app.storage import vocabularies as vocab_repo
 from app.storage.vocabularies import VocabularyRecord
 
@@ -51,23 +51,30 @@ class LiveIndex:
 
     def _load_pair(self, record: VocabularyRecord) -> ActivePair:
         vocab = load_vocabulary(self.ctx, record)
+        dim = vocab.dimension(self.ctx.settings.encode.params())  # v words, + c with Shape-DNA fusion
         encode_missing(self.ctx, record.id)  # e.g. ready before any vocabulary existed
         with self.ctx.db.read() as conn:
             ids, vectors, cursor = vocab_repo.vectors(conn, record.id)
+        if len(ids) and vectors.shape[1] != dim:  # stored under other encode settings (fusion flipped)
+            log.warning("vectors of vocabulary %d are %d-long, %d expected: re-encoding", record.id,
+                        vectors.shape[1], dim)
+            reencode_version(self.ctx, record)
+            with self.ctx.db.read() as conn:
+                ids, vectors, cursor = vocab_repo.vectors(conn, record.id)
         backend = self.ctx.settings.index_backend
         path = self.ctx.index_path(record.id)
         why = ""
         try:
             index = load_index(backend, path)
-            if index.dim != vocab.size:
-                why = f"dimension {index.dim} != {vocab.size} words"
+            if index.dim != dim:
+                why = f"dimension {index.dim} != {dim} ({vocab.size} words, fused: {dim > vocab.size})"
             elif not np.array_equal(index.ids(), np.sort(ids)):
                 why = f"{index.count} ids in the file, {len(ids)} in the database"
         except IndexFileError as exc:
             why = str(exc)
         if why:
             log.warning("index of vocabulary %d rebuilt from stored vectors: %s", record.id, why)
-            index = new_index(backend, vocab.size)
+            index = new_index(backend, dim)
             if len(ids):
                 index.add(ids, vectors)
             index.save(path)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import shutil
+import sqlite3
 import threading
 import time
 from collections.abc import Callable
@@ -11,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.core.fusion import DEFAULT_WEIGHT
 from app.core.pipeline import ShapeDescription
 from app.core.vocabulary import Vocabulary
 from app.index import new_index
@@ -99,11 +101,25 @@ def load_descriptions(ctx: ServiceContext, model_ids: list[int]) -> tuple[list[i
 
 
 def encode_all(ctx: ServiceContext, vocab: Vocabulary, descs: list[ShapeDescription]) -> np.ndarray:
-    """(n, v) float32 BoF vectors."""
+    """(n, vocab.dimension(params)) float32 vectors: BoF, or BoF + Shape-DNA when fused."""
     params = ctx.settings.encode.params()
     if not descs:
-        return np.zeros((0, vocab.size), np.float32)
+        return np.zeros((0, vocab.dimension(params)), np.float32)
     return np.stack([vocab.encode(d, params) for d in descs])
+
+
+def fit_vocabulary(
+    ctx: ServiceContext, descs: list[ShapeDescription], size: int, run: str, seed: int,
+    fusion_weight: float = DEFAULT_WEIGHT, metadata: dict | None = None,
+) -> Vocabulary:
+    """k-means words on `descs`, plus the fusion scales of the same shapes (BoF under the service's
+    encode settings, and Shape-DNA): fixed now, so every vector of this version stays comparable."""
+    vocab = Vocabulary.fit(descs, size=size, run=run, seed=seed, metadata=metadata)
+    try:
+        return vocab.with_fusion(descs, ctx.settings.encode.params(), fusion_weight)
+    except ValueError as exc:  # one training shape, or spectra too short: the BoF alone still serves
+        log.warning("vocabulary without fusion scales (pure BoF): %s", exc)
+        return vocab
 
 
 def rebuild_vocabulary(
@@ -119,6 +135,8 @@ def rebuild_vocabulary(
     size = int(payload.get("size") or ctx.settings.vocabulary_size)
     run = str(payload.get("run") or ctx.settings.vocabulary_run)
     seed = int(payload.get("seed") or 0)
+    weight = payload.get("fusion_weight")
+    weight = DEFAULT_WEIGHT if weight is None else float(weight)
     with ctx.db.read() as conn:
         ids = models_repo.ready_ids(conn)
     ids, descs = load_descriptions(ctx, ids)
@@ -127,13 +145,13 @@ def rebuild_vocabulary(
     timings["load_descriptions"] = time.perf_counter() - t
     keep_alive()
     t = time.perf_counter()
-    vocab = Vocabulary.fit(descs, size=size, run=run, seed=seed, metadata={"models": len(descs)})
+    vocab = fit_vocabulary(ctx, descs, size, run, seed, weight, metadata={"models": len(descs)})
     timings["fit"] = time.perf_counter() - t
     keep_alive()
     t = time.perf_counter()
     vid = register(ctx, vocab, activate=False)
     vectors = encode_all(ctx, vocab, descs)
-    index = new_index(ctx.settings.index_backend, vocab.size)
+    index = new_index(ctx.settings.index_backend, vocab.dimension(ctx.settings.encode.params()))
     index.add(np.asarray(ids, np.int64), vectors)
     index.save(ctx.index_path(vid))
     timings["encode_and_index"] = time.perf_counter() - t
@@ -206,14 +224,37 @@ def reencode_active(ctx: ServiceContext, job_id: int) -> dict:
         ids = models_repo.ready_ids(conn)
     if record is None:
         raise InvalidInputError("no active vocabulary: rebuild the vocabulary first")
-    vocab = load_vocabulary(ctx, record)
-    ids, descs = load_descriptions(ctx, ids)
-    vectors = encode_all(ctx, vocab, descs)
+    ids, vectors = encode_version(ctx, record, ids)
     timings = {"encode": time.perf_counter() - t, "models": len(ids), "vocabulary_id": record.id}
     with ctx.db.write() as conn:
-        alive = set(models_repo.get_many(conn, ids))
-        for mid, vec in zip(ids, vectors, strict=True):
-            if mid in alive:
-                vocab_repo.put_vector(conn, mid, record.id, vec)
+        store_vectors(conn, record.id, ids, vectors)
         jobs_repo.mark_done(conn, job_id, timings)
     return timings
+
+
+def encode_version(
+    ctx: ServiceContext, record: VocabularyRecord, model_ids: list[int]
+) -> tuple[list[int], np.ndarray]:
+    """Encode `model_ids` from their cached descriptions with version `record` -> ids, (n, dim) vectors."""
+    vocab = load_vocabulary(ctx, record)
+    ids, descs = load_descriptions(ctx, model_ids)
+    return ids, encode_all(ctx, vocab, descs)
+
+
+def store_vectors(conn: sqlite3.Connection, vocabulary_id: int, ids: list[int], vectors: np.ndarray) -> None:
+    """Replace the stored vectors of the models of `ids` still alive (deleted meanwhile: skipped)."""
+    alive = set(models_repo.get_many(conn, ids))
+    for mid, vec in zip(ids, vectors, strict=True):
+        if mid in alive:
+            vocab_repo.put_vector(conn, mid, vocabulary_id, vec)
+
+
+def reencode_version(ctx: ServiceContext, record: VocabularyRecord) -> int:
+    """Re-encode every ready model with version `record` (its stored vectors were encoded under
+    other settings, e.g. SHAPEBAG_ENCODE__FUSION flipped); returns how many."""
+    with ctx.db.read() as conn:
+        ids = models_repo.ready_ids(conn)
+    ids, vectors = encode_version(ctx, record, ids)
+    with ctx.db.write() as conn:
+        store_vectors(conn, record.id, ids, vectors)
+    return len(ids)

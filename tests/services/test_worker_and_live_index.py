@@ -83,18 +83,20 @@ def test_live_index_follows_new_vectors_and_rebuilds_a_disagreeing_file(data_dir
     n = pair.index.count
     assert pair.reconciled in ("loaded", "rebuilt: no index file at " + str(ctx.index_path(pair.record.id)))
     ids = pair.index.ids()
+    dim = pair.index.dim  # words + Shape-DNA: the rebuild stored fusion scales
+    assert dim == pair.vocabulary.dimension(ctx.settings.encode.params()) > pair.vocabulary.size
     # a re-encoded vector (new seq) replaces the old one in the live index
     with ctx.db.write() as conn:
-        vocab_repo.put_vector(conn, int(ids[0]), pair.record.id, np.eye(pair.vocabulary.size)[0])
+        vocab_repo.put_vector(conn, int(ids[0]), pair.record.id, np.eye(dim)[0])
     assert live.refresh() == 1 and live.pair.index.count == n
-    dist, got, _ = live.search(np.eye(pair.vocabulary.size, dtype=np.float32)[0], 1)
+    dist, got, _ = live.search(np.eye(dim, dtype=np.float32)[0], 1)
     assert got[0] == ids[0] and dist[0] == pytest.approx(0.0)
     live.remove([int(ids[0])])
     assert live.pair.index.count == n - 1
     assert live.refresh() == 0  # a deleted id is not brought back by a late poll
     live.save()
     # a file that disagrees with the database (one id missing) is rebuilt on load
-    stale = new_index(ctx.settings.index_backend, pair.vocabulary.size)
+    stale = new_index(ctx.settings.index_backend, dim)
     with ctx.db.read() as conn:
         all_ids, vectors, _ = vocab_repo.vectors(conn, pair.record.id)
     stale.add(all_ids[1:], vectors[1:])
@@ -103,6 +105,31 @@ def test_live_index_follows_new_vectors_and_rebuilds_a_disagreeing_file(data_dir
     fresh.refresh()
     assert fresh.pair.reconciled.startswith("rebuilt")
     np.testing.assert_array_equal(fresh.pair.index.ids(), np.sort(all_ids))
+
+
+def test_flipping_fusion_re_encodes_the_stored_vectors_on_load(data_dir):
+    from app.config import EncodeSettings
+
+    ctx = open_context(make_settings(data_dir))
+    fused = LiveIndex(ctx)
+    fused.refresh()
+    pair = fused.pair
+    words, ids = pair.vocabulary.size, pair.index.ids()
+    assert pair.vocabulary.fusion is not None and pair.index.dim > words
+    plain_ctx = open_context(make_settings(data_dir, encode=EncodeSettings(fusion=False)))
+    plain = LiveIndex(plain_ctx)
+    plain.refresh()  # stored vectors are fused, the settings want pure BoF: re-encoded, index rebuilt
+    assert plain.pair.index.dim == words and plain.pair.reconciled.startswith("rebuilt: dimension")
+    np.testing.assert_array_equal(plain.pair.index.ids(), ids)
+    with ctx.db.read() as conn:
+        _, vectors, _ = vocab_repo.vectors(conn, pair.record.id)
+    assert vectors.shape == (len(ids), words)
+    # each model's nearest neighbour is itself, at distance 0, in the pure-BoF index as well
+    dist, got, _ = plain.search(vectors[0], 1)
+    assert dist[0] == pytest.approx(0.0)
+    fresh = LiveIndex(ctx)  # and back: fused again
+    fresh.refresh()
+    assert fresh.pair.index.dim == pair.index.dim
 
 
 def test_similar_racing_a_swap_reads_the_vector_again(data_dir, monkeypatch):
