@@ -64,7 +64,8 @@ def consistent(data_dir: Path) -> dict:
     assert sorted(int(i) for i in ids) == ready
     vocab = Vocabulary.load(vocabularies.inside_data_dir(ctx, active.path))
     index = load_index(ctx.settings.index_backend, ctx.index_path(active.id))
-    assert index.dim == vocab.size and sorted(index.ids().tolist()) == ready
+    assert index.dim == vocab.dimension(ctx.settings.encode.params())  # words (+ Shape-DNA when fused)
+    assert sorted(index.ids().tolist()) == ready
     leftovers = [str(p) for p in data_dir.rglob(".*.tmp")]
     return {
         "models": len(models),
