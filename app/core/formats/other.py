@@ -1,0 +1,37 @@
+"""3MF (3D printing), COLLADA (.dae) through trimesh; raw Draco (.drc) through DracoPy."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from app.core.formats.containers import open_zip
+from app.core.formats.scene import load_with_trimesh, short
+from app.core.meshdata import Budget, InvalidMeshError
+
+
+def read_3mf(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
+    """3MF: a zip of XML; every build item with its transform (trimesh, which needs lxml and networkx)."""
+    open_zip(data, budget, "3MF").close()  # refuse a zip bomb before trimesh unpacks it
+    return load_with_trimesh(data, "3mf", "3MF")
+
+
+def read_dae(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
+    """COLLADA: the visual scene's triangle geometry with node transforms (trimesh + pycollada)."""
+    return load_with_trimesh(data, "dae", "COLLADA")
+
+
+def read_drc(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
+    """A raw Draco bitstream (what draco_encoder writes) -> vertices (n, 3), faces (f, 3)."""
+    import DracoPy
+
+    if not data.startswith(b"DRACO"):
+        raise InvalidMeshError("could not read the file as Draco: it does not start with 'DRACO'")
+    try:
+        decoded = DracoPy.decode(data)
+    except Exception as exc:  # the decoder raises its own types for corrupt streams
+        raise InvalidMeshError(f"could not read the file as Draco: {short(exc)}") from exc
+    points = np.asarray(decoded.points, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(getattr(decoded, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
+    budget.vertices(len(points), "the Draco file")
+    budget.faces(len(faces), "the Draco file")
+    return points, faces
