@@ -1,4 +1,11 @@
-"""FastAPI dependencies as Annotated aliases; the admin guard."""
+"""FastAPI dependencies as Annotated aliases; the doors (admin token, optional write token).
+
+Which token opens what (docs/reliability.md, "The doors"):
+- reads (GET, POST /search, the web page): open;
+- POST /models: open while SHAPEBAG_API_TOKEN is unset; once set, that token or the admin token;
+- DELETE /models/{id}: the API token (when set) or the admin token, never open;
+- /admin/*: the admin token only.
+"""
 
 from __future__ import annotations
 
@@ -57,3 +64,56 @@ def require_admin(
 
 
 AdminDep = Annotated[None, Depends(require_admin)]
+
+AdminHeader = Annotated[str | None, Header(description="the SHAPEBAG_ADMIN_TOKEN secret")]
+ApiHeader = Annotated[str | None, Header(description="the SHAPEBAG_API_TOKEN secret")]
+BearerHeader = Annotated[
+    str | None, Header(description="Bearer <SHAPEBAG_API_TOKEN or SHAPEBAG_ADMIN_TOKEN>")
+]
+
+
+def _same(given: str | None, secret: str) -> bool:
+    return bool(given) and bool(secret) and hmac.compare_digest(given.encode("utf-8"), secret.encode("utf-8"))  # type: ignore[union-attr]
+
+
+def _writer(
+    settings: Settings, authorization: str | None, x_api_token: str | None, x_admin_token: str | None
+) -> bool:
+    """True when a header carries the API token (if one is set) or the admin token."""
+    bearer = None
+    if authorization and authorization[:7].lower() == "bearer ":
+        bearer = authorization[7:].strip()
+    if _same(x_admin_token, settings.admin_token) or _same(bearer, settings.admin_token):
+        return True
+    return bool(settings.api_token) and (
+        _same(x_api_token, settings.api_token) or _same(bearer, settings.api_token)
+    )
+
+
+def require_upload(
+    settings: SettingsDep,
+    authorization: BearerHeader = None,
+    x_api_token: ApiHeader = None,
+    x_admin_token: AdminHeader = None,
+) -> None:
+    """POST /models: open unless SHAPEBAG_API_TOKEN is set; then that token or the admin token."""
+    if settings.api_token and not _writer(settings, authorization, x_api_token, x_admin_token):
+        raise AdminAuthError("uploads need the API token: 'Authorization: Bearer <token>' or 'X-API-Token'")
+
+
+def require_delete(
+    settings: SettingsDep,
+    authorization: BearerHeader = None,
+    x_api_token: ApiHeader = None,
+    x_admin_token: AdminHeader = None,
+) -> None:
+    """DELETE /models/{id}: the API token (when set) or the admin token; never open."""
+    if not _writer(settings, authorization, x_api_token, x_admin_token):
+        which = (
+            "the API token or the admin token" if settings.api_token else "the admin token (X-Admin-Token)"
+        )
+        raise AdminAuthError(f"deleting a model needs {which}")
+
+
+UploadDep = Annotated[None, Depends(require_upload)]
+DeleteDep = Annotated[None, Depends(require_delete)]

@@ -77,9 +77,11 @@ def test_upload_ingest_search_duplicate_and_delete(data_dir, corpus):
         blobs = BlobStore(data_dir.resolve())
         mesh_file = blobs.mesh_path(model["sha256"], model["file_type"])
         assert mesh_file.is_file() and blobs.description_path(model["id"]).is_file()
-        assert client.delete(f"/models/{model['id']}").status_code == 204
+        admin = {"X-Admin-Token": "test-token"}  # no SHAPEBAG_API_TOKEN: deletion needs the admin token
+        assert client.delete(f"/models/{model['id']}").status_code == 401
+        assert client.delete(f"/models/{model['id']}", headers=admin).status_code == 204
         assert client.get(f"/models/{model['id']}").status_code == 404
-        assert client.delete(f"/models/{model['id']}").json()["error"]["code"] == "not_found"
+        assert client.delete(f"/models/{model['id']}", headers=admin).json()["error"]["code"] == "not_found"
         assert not mesh_file.exists() and not blobs.description_path(model["id"]).exists()
         after = _search(client, path, k=20).json()
         assert model["id"] not in [h["model_id"] for h in after["data"]]

@@ -140,3 +140,77 @@ def test_container_runs_as_non_root():
     assert users, "the runtime stage has no USER line"
     user = users[-1].split(":")[0]
     assert user not in ("0", "root")
+
+
+def _sphere_obj(scale: float) -> bytes:
+    import trimesh
+
+    from tests.reliability.corpus import obj_text
+
+    s = trimesh.creation.icosphere(subdivisions=2)
+    return obj_text(s.vertices * [1.0, scale, 0.9], s.faces)
+
+
+def _post(client, content: bytes, headers: dict | None = None):
+    return client.post("/models", files={"file": ("door.obj", content)}, headers=headers or {})
+
+
+WRONG_TOKENS = ("api-s3cret!", "api-s3cret api-s3cret", "api-s3cre", "API-S3CRET", "", "x" * 10_000, "admin-s3cret-")
+
+
+def test_without_an_api_token_uploads_are_open_and_deletion_needs_the_admin_token(data_dir):
+    with TestClient(create_app(make_settings(data_dir, admin_token="admin-s3cret"))) as client:
+        r = _post(client, _sphere_obj(1.11))
+        assert r.status_code == 202, r.text
+        model_id = r.json()["model_id"]
+        for headers in (
+            {},
+            {"X-API-Token": "anything"},
+            {"Authorization": "Bearer anything"},
+            {"X-Admin-Token": "nope"},
+        ):
+            r = client.delete(f"/models/{model_id}", headers=headers)
+            assert r.status_code == 401 and r.headers["www-authenticate"], headers
+        assert client.get(f"/models/{model_id}").status_code == 200  # refused deletes delete nothing
+        assert (
+            client.delete(f"/models/{model_id}", headers={"Authorization": "Bearer admin-s3cret"}).status_code
+            == 204
+        )
+
+
+def test_with_an_api_token_writes_need_it_or_the_admin_token(data_dir):
+    settings = make_settings(data_dir, admin_token="admin-s3cret", api_token="api-s3cret")
+    with TestClient(create_app(settings)) as client:
+        before = client.get("/models").json()["count"]
+        for i, wrong in enumerate(WRONG_TOKENS):
+            for headers in (
+                {"X-API-Token": wrong},
+                {"Authorization": f"Bearer {wrong}"},
+                {"X-Admin-Token": wrong},
+                {},
+            ):
+                r = _post(client, _sphere_obj(1.2 + i / 100), headers)
+                assert r.status_code == 401 and r.headers["www-authenticate"], (wrong[:20], headers)
+        assert client.get("/models").json()["count"] == before  # nothing stored by a refused upload
+        ids = []
+        for i, headers in enumerate(
+            (
+                {"X-API-Token": "api-s3cret"},
+                {"Authorization": "Bearer api-s3cret"},
+                {"Authorization": "bearer api-s3cret"},
+                {"X-Admin-Token": "admin-s3cret"},
+                {"Authorization": "Bearer admin-s3cret"},
+            )
+        ):
+            r = _post(client, _sphere_obj(1.5 + i / 100), headers)
+            assert r.status_code == 202, (headers, r.text)
+            ids.append(r.json()["model_id"])
+        assert client.delete(f"/models/{ids[0]}").status_code == 401
+        assert client.delete(f"/models/{ids[0]}", headers={"X-API-Token": "api-s3cre"}).status_code == 401
+        assert client.delete(f"/models/{ids[0]}", headers={"X-API-Token": "api-s3cret"}).status_code == 204
+        assert (
+            client.delete(f"/models/{ids[1]}", headers={"X-Admin-Token": "admin-s3cret"}).status_code == 204
+        )
+        # reads stay open
+        assert client.get(f"/models/{ids[2]}").status_code == 200
+        assert client.get("/models").status_code == 200

@@ -11,7 +11,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from pydantic import ValidationError
 
 from app.api import limits
-from app.api.deps import CtxDep, RuntimeDep
+from app.api.deps import CtxDep, DeleteDep, RuntimeDep, UploadDep
 from app.api.limits import IdPath
 from app.api.schemas import (
     ErrorResponse,
@@ -28,6 +28,7 @@ from app.services.errors import InvalidInputError
 
 router = APIRouter(prefix="/models", tags=["models"])
 ERRORS: dict[int | str, dict] = {c: {"model": ErrorResponse} for c in (404, 413, 422, 503)}
+WRITE_ERRORS = {**ERRORS, 401: ERRORS[404]}
 
 UPLOAD_BODY = multipart_body(
     "OBJ/OFF/PLY/STL/GLB",
@@ -41,10 +42,13 @@ UPLOAD_BODY = multipart_body(
     "",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=ModelAccepted,
-    responses={**ERRORS, **{c: ERRORS[422] for c in (415, 504, 507)}},  # compressed body, time limit, disk
+    responses={
+        **WRITE_ERRORS,
+        **{c: ERRORS[422] for c in (415, 504, 507)},
+    },  # compressed body, time limit, disk
     openapi_extra=UPLOAD_BODY,
 )
-async def upload_model(request: Request, runtime: RuntimeDep) -> JSONResponse:
+async def upload_model(request: Request, runtime: RuntimeDep, _: UploadDep) -> JSONResponse:
     """Store a mesh and queue its ingestion (202); identical content answers 200 with the existing model."""
     ctx = runtime.ctx
     form = await read_form(request, ctx.settings.max_upload_bytes)
@@ -98,8 +102,8 @@ def get_mesh(model_id: IdPath, ctx: CtxDep) -> FileResponse:
     return FileResponse(path, media_type=media, filename=f"{model.name}.{model.file_type}")
 
 
-@router.delete("/{model_id}", status_code=status.HTTP_204_NO_CONTENT, responses=ERRORS)
-def delete_model(model_id: IdPath, runtime: RuntimeDep) -> Response:
+@router.delete("/{model_id}", status_code=status.HTTP_204_NO_CONTENT, responses=WRITE_ERRORS)
+def delete_model(model_id: IdPath, runtime: RuntimeDep, _: DeleteDep) -> Response:
     """Gone from the index, the database and the blob store."""
     catalog.delete_model(runtime.ctx, runtime.live, model_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
