@@ -31,31 +31,25 @@ RUN python3 -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.tom
 FROM deps AS venv
 RUN pip uninstall -q -y setuptools wheel pip
 
-# ---- package: shapebag alone (no deps) into /opt/shapebag/lib, with its `shapebag` script ----
+# ---- package: shapebag alone (no deps) into /opt/shapebag/lib, with its `shapebag` script and its package
+# data: the web page and the shipped default vocabulary (app/data/vocabulary/default, found through
+# importlib.resources exactly as in a wheel or editable install) ----
 FROM deps AS package
 # README.md* : optional (pyproject names it as the long description when present)
 COPY pyproject.toml README.md* ./
 COPY app/ ./app/
 # no build isolation: the build backend is already in the venv, so a code-only rebuild needs no network
+# chmod: a vocabulary saved locally may be 0700 (a private temp dir). -P: import the installed app, not ./app
 RUN pip install --no-deps --no-build-isolation --target /opt/shapebag/lib . \
-    && python3 -c "import app.cli"
+    && chmod -R a+rX,go-w /opt/shapebag/lib \
+    && python3 -P -c "from app.config import SHIPPED_VOCABULARY as v; assert (v / 'vocabulary.json').is_file(), v"
 
-# ---- shipped: the default vocabulary (data/vocabulary/default, small, committed), readable by everyone ----
-# The installed package cannot find it next to app/, hence SHAPEBAG_DEFAULT_VOCABULARY below. A directory
-# source is copied by its contents (data/vocabulary -> shipped/vocabulary); pyproject.toml rides along so the
-# COPY still has a source in a checkout without data/ (the service then fits a vocabulary itself once enough
-# models are ready). chmod: a vocabulary saved locally may be 0700 (written through a private temp dir).
-FROM ${BASE_IMAGE} AS shipped
-COPY pyproject.toml data* /opt/shapebag/shipped/
-RUN chmod -R a+rX,go-w /opt/shapebag/shipped
-
-# ---- runtime: base + venv + package + shipped data; no pip, no build tools, no sources, no compiler ----
+# ---- runtime: base + venv + package; no pip, no build tools, no sources, no compiler ----
 FROM ${BASE_IMAGE}
 ENV PATH=/opt/shapebag/lib/bin:/opt/venv/bin:$PATH \
     PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
-    SHAPEBAG_DATA_DIR=/data \
-    SHAPEBAG_DEFAULT_VOCABULARY=/opt/shapebag/shipped/vocabulary/default
+    SHAPEBAG_DATA_DIR=/data
 # a fixed uid so that files on the /data volume keep one owner across rebuilds
 RUN groupadd --gid 10001 shapebag \
     && useradd --uid 10001 --gid shapebag --no-log-init --no-create-home --home-dir /opt/shapebag \
@@ -64,7 +58,6 @@ RUN groupadd --gid 10001 shapebag \
     && chown shapebag:shapebag /data
 COPY --from=venv /opt/venv /opt/venv
 COPY --from=package /opt/shapebag/lib /opt/shapebag/lib
-COPY --from=shipped /opt/shapebag/shipped /opt/shapebag/shipped
 WORKDIR /opt/shapebag
 USER 10001:10001
 VOLUME /data

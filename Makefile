@@ -6,6 +6,9 @@ DATA    ?= var/data
 PORT    ?= 8000
 DATASET ?= ../shared/datasets/shrec11-simplified
 DOCKER_UP ?= ../shared/containers/docker-up.sh
+SHIPPED_VOCAB   := app/data/vocabulary/default
+VOCAB_CLASSES   ?= 8
+VOCAB_PER_CLASS ?= 12
 
 .DEFAULT_GOAL := help
 .PHONY: help install run serve test test-fast lint format evaluate vocabulary bench docker-lint docker-test clean
@@ -44,11 +47,11 @@ format: install  ## ruff format + autofix
 evaluate: install  ## Table 2 on SHREC'11 (DATASET=...)
 	$(BIN)/shapebag evaluate $(DATASET)
 
-vocabulary: install  ## reproduce data/vocabulary/default (synthetic corpus, 8 x 12 shapes, seed 0)
+vocabulary: install  ## refit the shipped app/data/vocabulary/default (synthetic corpus VOCAB_CLASSES x VOCAB_PER_CLASS, seed 0)
 	rm -rf var/corpus-vocab var/vocabulary-default
-	$(BIN)/python -c "from app.datasets.synthetic import generate; generate('var/corpus-vocab', classes=8, per_class=12, seed=0)"
+	$(BIN)/python -c "from app.datasets.synthetic import generate; generate('var/corpus-vocab', classes=$(VOCAB_CLASSES), per_class=$(VOCAB_PER_CLASS), seed=0)"
 	$(BIN)/shapebag vocabulary fit var/corpus-vocab --out var/vocabulary-default --size 64 --run run5 --seed 0
-	@echo "compare with data/vocabulary/default, then: rm -rf data/vocabulary/default && mv var/vocabulary-default data/vocabulary/default"
+	@echo "compare with $(SHIPPED_VOCAB), then: rm -rf $(SHIPPED_VOCAB) && mv var/vocabulary-default $(SHIPPED_VOCAB)"
 
 bench: install  ## short benchmark suite (prints tables, writes results/*.json)
 	$(BIN)/python -m benchmarks.run --short

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from importlib import resources
 from pathlib import Path
 
 from pydantic import BaseModel, Field, field_validator
@@ -13,8 +14,8 @@ from app.core.resolution import SUBDIVISIONS
 from app.core.vocabulary import EncodeParams
 
 DEFAULT_ADMIN_TOKEN = "change-me"
-REPO_ROOT = Path(__file__).resolve().parent.parent
-SHIPPED_VOCABULARY = REPO_ROOT / "data" / "vocabulary" / "default"
+# package data ([tool.setuptools.package-data]): one path for editable, wheel and container installs
+SHIPPED_VOCABULARY = Path(str(resources.files("app") / "data" / "vocabulary" / "default"))
 
 
 class DescribeSettings(BaseModel):

@@ -22,7 +22,7 @@ if TYPE_CHECKING:  # conftest is pytest's to import; at runtime the fixture hand
 pytestmark = [pytest.mark.docker, pytest.mark.slow]
 
 DATASET = Path(__file__).resolve().parents[3] / "shared" / "datasets" / "shrec11-simplified"
-SHIPPED = Path(__file__).resolve().parents[2] / "data" / "vocabulary" / "default" / "vocabulary.json"
+SHIPPED = Path(__file__).resolve().parents[2] / "app" / "data" / "vocabulary" / "default" / "vocabulary.json"
 WAIT_S = 240  # --wait for build + healthy; each bounded poll below has its own limit
 
 
@@ -99,7 +99,7 @@ def ensure_vocabulary(client: httpx.Client, compose: Compose, indexed: int) -> N
     """The shipped vocabulary is normally active; where a checkout has none, fit one on the uploads."""
     admin = {"X-Admin-Token": compose.env["SHAPEBAG_ADMIN_TOKEN"]}
     active = client.get("/admin/vocabulary", headers=admin).json()["id"]
-    if SHIPPED.is_file():  # the image carries it (SHAPEBAG_DEFAULT_VOCABULARY): it must be the active one
+    if SHIPPED.is_file():  # the image carries it (package data): it must be the active one
         assert active is not None, (
             f"{SHIPPED.parent} is in the repo but the api has no vocabulary\n{compose.logs()}"
         )
