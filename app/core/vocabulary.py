@@ -88,6 +88,8 @@ class Vocabulary:
         # c: as many eigenvalues as every training shape has (SHAPE_DNA_COUNT unless k is tiny)
         available = min(len(d.eigenvalues) - first_nonzero(np.sort(d.eigenvalues)) for d in descriptions)
         count = min(SHAPE_DNA_COUNT, available)
+        if count < 1:
+            raise ValueError("a training shape has no non-zero eigenvalue: no Shape-DNA to fuse")
         bofs = np.stack([self.encode(d, params) for d in descriptions])  # (N, v)
         dnas = np.stack([dna_vector(d, count) for d in descriptions])  # (N, c)
         scales = fit_scales(bofs, dnas, weight)
