@@ -35,11 +35,12 @@ def ingest_folder(settings, directory: Path, processes: int, wait: bool = True) 
     from tqdm import tqdm
 
     from app.datasets.folder import DatasetError, read_labelled_folder
-    from app.services import bulk
+    from app.services import bulk, vocabularies
     from app.services.context import open_context
     from app.worker.processes import WorkerPool
 
     ctx = open_context(settings)
+    vocabularies.ensure_default(ctx)  # as the server does: the shipped vocabulary, not a fit on this folder
     try:
         total = len(read_labelled_folder(directory))
     except DatasetError as exc:
