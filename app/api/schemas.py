@@ -100,7 +100,7 @@ class SearchHit(BaseModel):
     model_id: int
     name: str
     label: str | None
-    distance: float = Field(description="L1 distance between BoF vectors")
+    distance: float = Field(description="L1 distance between BoF vectors (+ scaled Shape-DNA when fused)")
     rank: int
 
 
