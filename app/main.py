@@ -51,6 +51,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             settings.describe.params(),
             settings.max_vertices,
             settings.describe_timeout_s,
+            settings.worker_memory_mb,
         )
         await asyncio.to_thread(metrics.skip_history, ctx)
         if settings.warm_up:  # in the background: startup does not wait for it

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import multiprocessing as mp
+import os
 import time
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -12,6 +13,7 @@ from concurrent.futures.process import BrokenProcessPool
 from app.core.pipeline import DescribeParams, ShapeDescription, describe
 from app.services.errors import DescribeCrashedError, DescribeTimeoutError
 from app.services.mesh_policy import check_bytes, load_upload
+from app.worker.lifeline import cap_memory, die_with_parent
 from app.worker.processes import pin_threads
 
 log = logging.getLogger(__name__)
@@ -29,9 +31,19 @@ def describe_bytes(
     return description, seconds
 
 
+def init_process(parent_pid: int, memory_mb: int) -> None:
+    """Initializer of each pool process: die with the server, one BLAS thread, capped memory."""
+    die_with_parent(parent_pid)
+    pin_threads()
+    cap_memory(memory_mb)
+
+
 class QueryDescriber:
-    def __init__(self, processes: int, params: DescribeParams, max_vertices: int, timeout_s: float) -> None:
+    def __init__(
+        self, processes: int, params: DescribeParams, max_vertices: int, timeout_s: float, memory_mb: int = 0
+    ) -> None:
         self.processes = processes
+        self.memory_mb = memory_mb
         self.params = params
         self.max_vertices = max_vertices
         self.timeout_s = timeout_s
@@ -39,7 +51,10 @@ class QueryDescriber:
 
     def _new_pool(self) -> ProcessPoolExecutor:
         return ProcessPoolExecutor(
-            self.processes, mp_context=mp.get_context("spawn"), initializer=pin_threads
+            self.processes,
+            mp_context=mp.get_context("spawn"),
+            initializer=init_process,
+            initargs=(os.getpid(), self.memory_mb),
         )
 
     async def describe(self, data: bytes, file_type: str) -> tuple[ShapeDescription, dict[str, float]]:

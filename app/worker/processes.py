@@ -11,6 +11,7 @@ import time
 from multiprocessing.process import BaseProcess
 
 from app.config import Settings
+from app.worker.lifeline import cap_memory, die_with_parent, parent_alive
 
 log = logging.getLogger(__name__)
 
@@ -64,11 +65,33 @@ class StopFlag:
         return True
 
 
-def worker_main(settings_json: str, name: str, stop: StopFlag) -> None:
+class ParentWatch:
+    """The worker loop's stop condition: the shared flag, or a parent that is gone."""
+
+    def __init__(self, stop: StopFlag, parent_pid: int) -> None:
+        self.stop = stop
+        self.parent_pid = parent_pid
+
+    def is_set(self) -> bool:
+        return self.stop.is_set() or not parent_alive(self.parent_pid)
+
+    def wait(self, timeout: float | None = None) -> bool:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while not self.is_set():
+            left = StopFlag.POLL_S if deadline is None else deadline - time.monotonic()
+            if left <= 0:
+                return False
+            time.sleep(min(StopFlag.POLL_S, left))
+        return True
+
+
+def worker_main(settings_json: str, name: str, stop: StopFlag, parent_pid: int) -> None:
     """Entry point of one spawned worker process."""
+    die_with_parent(parent_pid)  # a SIGKILLed server must not leave its workers taking jobs
     pin_threads()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent owns shutdown; Ctrl-C reaches the group
     settings = Settings.model_validate_json(settings_json)
+    cap_memory(settings.worker_memory_mb)
     logging.basicConfig(
         level=settings.log_level.upper(), format="%(asctime)s %(processName)s %(levelname)s %(message)s"
     )
@@ -77,7 +100,7 @@ def worker_main(settings_json: str, name: str, stop: StopFlag) -> None:
     from app.worker.runner import Worker
 
     ctx = open_context(settings)
-    Worker(ctx, name).run_forever(stop)  # type: ignore[arg-type]
+    Worker(ctx, name).run_forever(ParentWatch(stop, parent_pid))  # type: ignore[arg-type]
 
 
 def process_name(prefix: str, slot: int) -> str:
@@ -110,7 +133,7 @@ class WorkerPool:
             name = process_name(self.prefix, slot)
             p = self._mp.Process(
                 target=worker_main,
-                args=(self.settings.model_dump_json(), name, self._stop),
+                args=(self.settings.model_dump_json(), name, self._stop, os.getpid()),
                 name=name,
                 daemon=True,
             )

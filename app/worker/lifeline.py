@@ -1,0 +1,57 @@
+"""Child processes die with their parent: a server killed with SIGKILL must not leave workers and query
+processes running on as orphans (they kept taking jobs beside the restarted server's own).
+
+Two mechanisms, because each has a gap: PR_SET_PDEATHSIG (Linux) signals the child when the *thread*
+that spawned it exits, and cannot be set before the fork; a watcher thread polling getppid() covers
+other platforms, spawning threads that end, and a parent that died before prctl ran.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import logging
+import os
+import resource
+import signal
+import sys
+import threading
+
+log = logging.getLogger(__name__)
+
+PR_SET_PDEATHSIG = 1
+POLL_S = 1.0
+
+
+def parent_alive(parent_pid: int) -> bool:
+    """Our parent is still the process that started us (after its death we are re-parented)."""
+    return os.getppid() == parent_pid
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """Call first thing in a child: SIGTERM when the parent dies (prctl) plus a getppid() watcher."""
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+        except (OSError, AttributeError):  # no libc symbol: the watcher below still works
+            log.warning("prctl(PR_SET_PDEATHSIG) unavailable; relying on the parent-pid watcher")
+    if not parent_alive(parent_pid):  # died between our fork and the prctl call
+        os._exit(1)
+
+    def watch() -> None:
+        while parent_alive(parent_pid):
+            threading.Event().wait(POLL_S)
+        os.kill(os.getpid(), signal.SIGTERM)  # the same death as PDEATHSIG, if that one did not come
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+def cap_memory(megabytes: int) -> None:
+    """RLIMIT_AS for this process: an allocation past it raises MemoryError instead of taking the host."""
+    if megabytes <= 0:
+        return
+    limit = megabytes * 1024 * 1024
+    _, hard = resource.getrlimit(resource.RLIMIT_AS)
+    if hard != resource.RLIM_INFINITY:
+        limit = min(limit, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
