@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError, NotFoundError
 from app.services.live_index import LiveIndex
@@ -45,16 +47,29 @@ def get_job(ctx: ServiceContext, job_id: int) -> JobRecord:
 
 
 def delete_model(ctx: ServiceContext, live: LiveIndex | None, model_id: int) -> None:
-    with ctx.db.write() as conn:
-        model = models_repo.get(conn, model_id)
-        if model is None:
-            raise NotFoundError(f"no model with id {model_id}")
-        models_repo.delete(conn, model_id)  # cascades to its BoF vectors
-        conn.execute(
-            "UPDATE jobs SET state = 'failed', error = 'model deleted', lease_until = NULL"
-            " WHERE model_id = ? AND state = 'queued'",
-            (model_id,),
-        )
+    """Linearisable with an upload of the same bytes: the mesh file leaves under the write lock, in
+    the same transaction as the row, and ingestion.submit re-writes a missing file under that lock
+    before it inserts. So a new model never points at a file a delete is about to remove."""
+    hidden = None
+    try:
+        with ctx.db.write() as conn:
+            model = models_repo.get(conn, model_id)
+            if model is None:
+                raise NotFoundError(f"no model with id {model_id}")
+            models_repo.delete(conn, model_id)  # cascades to its BoF vectors
+            conn.execute(
+                "UPDATE jobs SET state = 'failed', error = 'model deleted', lease_until = NULL"
+                " WHERE model_id = ? AND state = 'queued'",
+                (model_id,),
+            )
+            if models_repo.get_by_sha256(conn, model.sha256) is None:  # no other model holds the content
+                hidden = ctx.blobs.hide_mesh(model.sha256, model.file_type)
+    except BaseException:
+        if hidden is not None:  # the transaction rolled back: the row is there, so is its file
+            os.replace(hidden, ctx.blobs.mesh_path(model.sha256, model.file_type))
+        raise
+    if hidden is not None:
+        hidden.unlink(missing_ok=True)
     if live is not None:
         live.remove([model_id])
-    ctx.blobs.delete_model_files(model_id, model.sha256, model.file_type)
+    ctx.blobs.delete_model_files(model_id)  # description and thumbnails: named by id, never shared

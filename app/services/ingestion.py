@@ -7,7 +7,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from app.core.mesh import InvalidMeshError, detect_format, load_mesh
+from app.core.mesh import detect_format, load_mesh
 from app.core.pipeline import describe
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError, QueueFullError
@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 class Submitted:
     model: ModelRecord
     job_id: int | None  # None: identical content was already there, no new work
-    created: bool
+    created: bool  # a new model (False: an existing one, re-queued if job_id is set)
 
 
 def submit(
@@ -38,33 +38,40 @@ def submit(
     label: str | None = None,
     metadata: dict | None = None,
 ) -> Submitted:
-    """Store the mesh (content-addressed) and queue its ingest job; identical content -> existing model.
+    """Store the mesh (content-addressed) and queue its ingest job; identical content -> existing model
+    (a failed one is queued again: the failure may have been transient).
 
     The format is checked here (cheap); the geometry is checked by the worker, and a bad mesh fails
     its job with the reason.
     """
-    try:
-        file_type = detect_format(filename)
-    except InvalidMeshError as exc:
-        raise InvalidInputError(str(exc)) from exc
+    file_type = detect_format(filename)  # UnsupportedFormatError: the same refusal as on /search
     if not data:
         raise InvalidInputError("the file is empty")
     metadata = check_metadata(metadata or {})  # a row that could not serialise back must never be stored
     digest = sha256_hex(data)
-    with ctx.db.read() as conn:
-        existing = models_repo.get_by_sha256(conn, digest)
-    if existing is not None:
-        return Submitted(existing, None, False)
-    ctx.blobs.put_mesh(data, file_type)  # before the row: a worker must find the file
+    ctx.blobs.put_mesh(data, file_type)  # outside the lock (the slow part); ensure_mesh re-checks under it
     with ctx.db.write() as conn:
-        existing = models_repo.get_by_sha256(conn, digest)  # lost a race with the same upload
-        if existing is not None:
-            return Submitted(existing, None, False)
+        existing = models_repo.get_by_sha256(conn, digest)
+        if existing is not None and existing.status != "failed":
+            return Submitted(existing, None, False)  # identical content: the existing model
         if jobs_repo.queue_depth(conn)["queued"] >= ctx.settings.queue_limit:
-            ctx.blobs.mesh_path(digest, file_type).unlink(missing_ok=True)  # no model refers to it
+            if existing is None:
+                ctx.blobs.mesh_path(digest, file_type).unlink(missing_ok=True)  # no model refers to it
             raise QueueFullError(
                 f"the ingestion queue is full ({ctx.settings.queue_limit} jobs): retry later"
             )
+        # a delete of the same content may have removed the file since put_mesh: deletes remove files
+        # under this lock, so checking here is enough (see catalog.delete_model)
+        if existing is not None:  # a failed model: uploading its bytes again retries it
+            if existing.file_type != file_type:  # same bytes, another extension: keep the model's file
+                ctx.blobs.mesh_path(digest, file_type).unlink(missing_ok=True)
+            ctx.blobs.ensure_mesh(data, digest, existing.file_type)
+            models_repo.set_queued(conn, existing.id)
+            job_id = jobs_repo.enqueue(conn, "ingest", model_id=existing.id)
+            model = models_repo.get(conn, existing.id)
+            assert model is not None
+            return Submitted(model, job_id, False)
+        ctx.blobs.ensure_mesh(data, digest, file_type)
         model_id = models_repo.insert(
             conn,
             name=name or Path(filename).stem,

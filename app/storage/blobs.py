@@ -59,9 +59,31 @@ class BlobStore:
     def thumbnail_path(self, model_id: int, size: int) -> Path:
         return self.root / "thumbnails" / f"{model_id}-{size}.png"
 
-    def delete_model_files(self, model_id: int, sha256: str, file_type: str) -> None:
-        """Remove the mesh, description and cached thumbnails of one model (missing files are fine)."""
-        self.mesh_path(sha256, file_type).unlink(missing_ok=True)
+    def ensure_mesh(self, data: bytes, sha256: str, file_type: str) -> Path:
+        """The mesh file of `data`, written again if a delete removed it meanwhile (call under the
+        database write lock: deletes remove mesh files under it, see hide_mesh)."""
+        path = self.mesh_path(sha256, file_type)
+        if not path.is_file():
+            atomic_write(path, data)
+        return path
+
+    def hide_mesh(self, sha256: str, file_type: str) -> Path | None:
+        """Move a mesh file aside (a temp name the start-up sweep removes if we die) and return where;
+        None if there was none. Called inside the delete's transaction; unlink it after the commit,
+        or put it back with os.replace if the transaction fails."""
+        path = self.mesh_path(sha256, file_type)
+        trash = path.with_name(f".{path.name}.deleted-{os.getpid()}-{id(path):x}.tmp")
+        try:
+            os.replace(path, trash)
+        except FileNotFoundError:
+            return None
+        return trash
+
+    def delete_model_files(self, model_id: int, sha256: str | None = None, file_type: str = "") -> None:
+        """Remove the description and cached thumbnails of one model, and its mesh when `sha256` is given
+        (content is shared by identity: the caller decides whether another model still needs it)."""
+        if sha256 is not None:
+            self.mesh_path(sha256, file_type).unlink(missing_ok=True)
         self.description_path(model_id).unlink(missing_ok=True)
         for thumb in (self.root / "thumbnails").glob(f"{model_id}-*.png"):
             thumb.unlink(missing_ok=True)

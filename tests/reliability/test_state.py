@@ -5,6 +5,7 @@ Every refused request must leave the store as it was; every accepted one must se
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
 
@@ -13,9 +14,10 @@ import trimesh
 from fastapi.testclient import TestClient
 
 from app.main import create_app
-from app.services import ingestion
+from app.services import catalog, ingestion
 from app.services.context import open_context
 from app.services.errors import InvalidInputError
+from app.storage import models as models_repo
 from tests.conftest import make_settings, wait_for
 from tests.reliability.corpus import bad_metadata, good_metadata, obj_text
 from tests.reliability.helpers import MULTIPART_HEADERS, multipart, snapshot
@@ -75,3 +77,101 @@ def test_every_door_that_stores_metadata_checks_it(settings):
             ingestion.submit(ctx, _mesh(0), "x.obj", metadata=bad)  # type: ignore[arg-type]
     with ctx.db.read() as conn:
         assert conn.execute("SELECT COUNT(*) FROM models").fetchone()[0] == 0
+
+
+# --- DELETE racing a re-upload of the same bytes (issue 12, item 2) ---------------------------------
+# Each window is opened deterministically by a hook at the exact point between two steps (no sleeps).
+
+
+def _ready_model(ctx, data: bytes):
+    from app.worker.runner import Worker
+
+    sub = ingestion.submit(ctx, data, "race.obj")
+    Worker(ctx, "race").run_forever(exit_when_idle=True)
+    return catalog.get_model(ctx, sub.model.id)
+
+
+def _ingest_all(ctx) -> None:
+    from app.worker.runner import Worker
+
+    Worker(ctx, "race").run_forever(exit_when_idle=True)
+
+
+def test_delete_landing_between_the_blob_write_and_the_insert(settings, monkeypatch):
+    """upload: file written ... [delete commits and removes the file] ... row inserted -> the new model
+    must still have its file (before: it pointed at nothing, failed 3 times, and blocked the bytes)."""
+    ctx = open_context(settings)
+    data = _mesh(7)
+    old = _ready_model(ctx, data)
+    real_put = ctx.blobs.put_mesh
+
+    def put_then_delete(blob: bytes, file_type: str):
+        out = real_put(blob, file_type)
+        monkeypatch.setattr(ctx.blobs, "put_mesh", real_put)  # once
+        catalog.delete_model(ctx, None, old.id)
+        return out
+
+    monkeypatch.setattr(ctx.blobs, "put_mesh", put_then_delete)
+    sub = ingestion.submit(ctx, data, "race.obj")
+    assert sub.model.id != old.id and sub.created, "answered with the model being deleted"
+    assert ctx.blobs.mesh_path(sub.model.sha256, "obj").read_bytes() == data
+    _ingest_all(ctx)
+    assert catalog.get_model(ctx, sub.model.id).status == "ready"
+
+
+def test_upload_landing_between_the_delete_commit_and_the_file_removal(settings):
+    """delete: row gone (committed) ... [upload of the same bytes] ... file removal -> the file the
+    new model needs must survive (before: the delete removed it after the upload had inserted)."""
+    ctx = open_context(settings)
+    data = _mesh(8)
+    old = _ready_model(ctx, data)
+    uploaded = []
+
+    class Hook:  # live.remove runs after the delete's commit, before its file clean-up
+        def remove(self, ids):
+            uploaded.append(ingestion.submit(ctx, data, "race.obj"))
+
+    catalog.delete_model(ctx, Hook(), old.id)  # type: ignore[arg-type]
+    (sub,) = uploaded
+    assert sub.model.id != old.id
+    assert ctx.blobs.mesh_path(sub.model.sha256, "obj").read_bytes() == data
+    _ingest_all(ctx)
+    assert catalog.get_model(ctx, sub.model.id).status == "ready"
+    assert not list(ctx.blobs.mesh_path(sub.model.sha256, "obj").parent.glob(".*.tmp"))  # no trash left
+
+
+def test_a_failed_delete_transaction_keeps_the_file(settings, monkeypatch):
+    ctx = open_context(settings)
+    data = _mesh(9)
+    old = _ready_model(ctx, data)
+
+    real_write = ctx.db.write
+
+    @contextlib.contextmanager
+    def commit_fails():  # the delete's transaction fails at its end, after the file was moved aside
+        with real_write() as conn:
+            yield conn
+            raise RuntimeError("disk went away")
+
+    monkeypatch.setattr(ctx.db, "write", commit_fails)
+    with pytest.raises(RuntimeError):
+        catalog.delete_model(ctx, None, old.id)
+    assert catalog.get_model(ctx, old.id).status == "ready"  # rolled back: the row is there...
+    assert ctx.blobs.mesh_path(old.sha256, "obj").read_bytes() == data  # ...and so is its file
+
+
+def test_a_failed_model_is_retried_by_uploading_its_bytes_again(served):
+    client, data_dir = served
+    ctx = client.app.state.runtime.ctx
+    data = _mesh(10)
+    r = client.post("/models", content=multipart("retry.obj", data), headers=MULTIPART_HEADERS)
+    model_id = r.json()["model_id"]
+    wait_for(lambda: client.get(f"/models/{model_id}").json()["status"] == "ready", timeout_s=60)
+    with ctx.db.write() as conn:  # as if every attempt had hit a transient fault
+        models_repo.set_failed(conn, model_id, "gave up after 3 attempts: FileNotFoundError")
+    again = client.post("/models", content=multipart("retry.obj", data), headers=MULTIPART_HEADERS)
+    assert again.status_code == 202 and again.json()["model_id"] == model_id
+    assert again.json()["job_id"] is not None and again.json()["status"] == "queued"
+    wait_for(lambda: client.get(f"/models/{model_id}").json()["status"] == "ready", timeout_s=60)
+    third = client.post("/models", content=multipart("retry.obj", data), headers=MULTIPART_HEADERS)
+    assert third.status_code == 200 and third.json()["job_id"] is None  # ready: plain deduplication

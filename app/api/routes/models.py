@@ -73,7 +73,7 @@ async def upload_model(request: Request, runtime: RuntimeDep, _: UploadDep) -> J
         status=result.model.status,
         model=ModelPublic.of(result.model),
     )
-    code = status.HTTP_202_ACCEPTED if result.created else status.HTTP_200_OK
+    code = status.HTTP_202_ACCEPTED if result.job_id is not None else status.HTTP_200_OK  # new or retried
     return JSONResponse(body.model_dump(), status_code=code)
 
 
