@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError, NotFoundError
@@ -50,7 +51,8 @@ def delete_model(ctx: ServiceContext, live: LiveIndex | None, model_id: int) -> 
     """Linearisable with an upload of the same bytes: the mesh file leaves under the write lock, in
     the same transaction as the row, and ingestion.submit re-writes a missing file under that lock
     before it inserts. So a new model never points at a file a delete is about to remove."""
-    hidden = None
+    hidden: Path | None = None
+    home: Path | None = None
     try:
         with ctx.db.write() as conn:
             model = models_repo.get(conn, model_id)
@@ -63,10 +65,11 @@ def delete_model(ctx: ServiceContext, live: LiveIndex | None, model_id: int) -> 
                 (model_id,),
             )
             if models_repo.get_by_sha256(conn, model.sha256) is None:  # no other model holds the content
+                home = ctx.blobs.mesh_path(model.sha256, model.file_type)
                 hidden = ctx.blobs.hide_mesh(model.sha256, model.file_type)
     except BaseException:
-        if hidden is not None:  # the transaction rolled back: the row is there, so is its file
-            os.replace(hidden, ctx.blobs.mesh_path(model.sha256, model.file_type))
+        if hidden is not None and home is not None:  # rolled back: the row is there, so is its file
+            os.replace(hidden, home)
         raise
     if hidden is not None:
         hidden.unlink(missing_ok=True)
