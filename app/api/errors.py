@@ -10,7 +10,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from app.core.mesh import InvalidMeshError
+from app.core.mesh import InvalidMeshError, UnsupportedFormatError
 from app.services import errors as e
 
 log = logging.getLogger(__name__)
@@ -52,6 +52,13 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(InvalidMeshError)
     async def _mesh(request: Request, exc: InvalidMeshError) -> JSONResponse:
         return error_response(422, "invalid_mesh", str(exc))
+
+    # a subclass of InvalidMeshError: Starlette picks the handler of the most specific class, so a format
+    # shapebag does not read is 415 on every door (/models, /search, /web/preview.png), named and with
+    # what to convert to; a file in a supported format that is broken stays 422 invalid_mesh
+    @app.exception_handler(UnsupportedFormatError)
+    async def _format(request: Request, exc: UnsupportedFormatError) -> JSONResponse:
+        return error_response(415, "unsupported_format", str(exc))
 
     @app.exception_handler(RequestValidationError)
     async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:

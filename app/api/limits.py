@@ -17,7 +17,7 @@ from fastapi import Path as PathParam
 from fastapi import Query
 
 from app.api.uploads import UploadForm
-from app.core.mesh import InvalidMeshError, detect_format
+from app.core.mesh import detect_format
 from app.services.errors import InvalidInputError
 
 MAX_FILENAME_CHARS = 255
@@ -55,11 +55,8 @@ def check_filename(filename: str) -> str:
 
 
 def upload_format(filename: str) -> str:
-    """'chair.obj' -> 'obj'; InvalidInputError (422 invalid_input) for an unsupported extension."""
-    try:
-        return detect_format(filename)
-    except InvalidMeshError as exc:
-        raise InvalidInputError(str(exc)) from exc
+    """'chair.obj' -> 'obj'; UnsupportedFormatError (415 unsupported_format, as on /search) otherwise."""
+    return detect_format(filename)
 
 
 def check_form(form: UploadForm, file_field: str = "file") -> None:

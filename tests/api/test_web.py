@@ -74,7 +74,7 @@ def test_preview_renders_the_uploaded_mesh(client: TestClient) -> None:
     ("files", "status", "code"),
     [
         ({"file": ("junk.obj", b"this is not a mesh")}, 422, "invalid_mesh"),
-        ({"file": ("model.xyz", b"v 0 0 0")}, 422, "invalid_mesh"),
+        ({"file": ("model.xyz", b"v 0 0 0")}, 415, "unsupported_format"),
         ({"other": ("a.obj", b"v 0 0 0")}, 422, "invalid_input"),
         ({"file": ("big.obj", b"#" * 300_000)}, 413, "payload_too_large"),
     ],
