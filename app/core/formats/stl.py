@@ -49,7 +49,10 @@ def _looks_ascii(data: bytes) -> bool:
 
 
 def _read_ascii(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
-    lines = _VERTEX.findall(text_lines(data))
+    text = text_lines(data)
+    lines = _VERTEX.findall(text)
+    if lines and b"endsolid" not in text[-4096:].lower():  # a cut between two facets still parses
+        raise InvalidMeshError("the ASCII STL does not end with 'endsolid': it is truncated")
     budget.faces(len(lines) // 3, "the STL file")
     if not lines:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
