@@ -52,6 +52,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             settings.max_vertices,
             settings.describe_timeout_s,
             settings.worker_memory_mb,
+            settings.search_queue,
         )
         await asyncio.to_thread(metrics.skip_history, ctx)
         if settings.warm_up:  # in the background: startup does not wait for it

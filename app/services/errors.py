@@ -45,3 +45,15 @@ class DescribeCrashedError(ServiceError):
     """The process describing a query died (e.g. out of memory); the pool was restarted."""
 
     code = "describe_crashed"
+
+
+class PoolBusyError(QueueFullError):
+    """Every query process is busy and the wait queue is full (503 + Retry-After, as a full queue)."""
+
+    code = "busy"
+
+
+class ResourceLimitError(PayloadTooLargeError):
+    """The input needs more memory (or other resources) than a pool process may use (413)."""
+
+    code = "resource_limit"

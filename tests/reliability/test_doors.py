@@ -155,7 +155,15 @@ def _post(client, content: bytes, headers: dict | None = None):
     return client.post("/models", files={"file": ("door.obj", content)}, headers=headers or {})
 
 
-WRONG_TOKENS = ("api-s3cret!", "api-s3cret api-s3cret", "api-s3cre", "API-S3CRET", "", "x" * 10_000, "admin-s3cret-")
+WRONG_TOKENS = (
+    "api-s3cret!",
+    "api-s3cret api-s3cret",
+    "api-s3cre",
+    "API-S3CRET",
+    "",
+    "x" * 10_000,
+    "admin-s3cret-",
+)
 
 
 def test_without_an_api_token_uploads_are_open_and_deletion_needs_the_admin_token(data_dir):
