@@ -103,7 +103,7 @@ def test_error_messages_say_what_is_wrong(served):
         "one-triangle": "too few",
         "zero-area-collinear": "zero total area",
         "non-manifold-fan": "non-manifold",
-        "tiny-components": "debris",
+        "triangle-soup": "triangle soup",
         "over-vertex-limit": f"limit of {MAX_VERTICES}",
         "wrong-extension": "unsupported mesh format",
         "path-traversal": "not a path",

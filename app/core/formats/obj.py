@@ -31,7 +31,7 @@ def read_obj(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
     f_lines = _F.findall(text)
     if not f_lines:
         raise InvalidMeshError(
-            "the mesh has no faces (the file has no OBJ 'f' lines; points and lines are not a surface)"
+            "the mesh has no faces (the OBJ file has no 'f' lines; a point cloud or lines are not a surface)"
         )
     values, widths = numbers(v_lines, "an OBJ vertex line")
     # each line has its own width: 'v x y z' and 'v x y z r g b' may be mixed in one file
