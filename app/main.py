@@ -14,7 +14,7 @@ from fastapi.middleware.cors import CORSMiddleware
 
 from app.api import errors
 from app.api.deps import Runtime
-from app.api.limits import RefuseEncodedBodies, check_data_dir
+from app.api.limits import GuardUploads, RefuseEncodedBodies, check_data_dir
 from app.api.routes import admin, health, jobs, labels, models, search, web
 from app.config import Settings
 from app.services import vocabularies
@@ -79,6 +79,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     errors.install(app)
     app.add_middleware(RefuseEncodedBodies)  # 415 for gzip/deflate bodies: nothing is ever inflated
+    app.add_middleware(  # 503 past N bodies being read at once, 408 after a stall
+        GuardUploads, max_concurrent=settings.max_concurrent_uploads, timeout_s=settings.upload_timeout_s
+    )
     if settings.cors_origins:  # closed unless configured
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "POST"])
 

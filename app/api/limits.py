@@ -6,6 +6,7 @@ query pool (QueryDescriber.check, app/services/mesh_policy.py). These checks are
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import tempfile
@@ -74,6 +75,19 @@ def check_form(form: UploadForm, file_field: str = "file") -> None:
             raise InvalidInputError(f"{name}: contains {odd}")
 
 
+async def send_error(
+    send, status: int, code: str, message: str, headers: dict[str, str] | None = None
+) -> None:
+    """A JSON error response sent straight from ASGI middleware, closing the connection."""
+    body = json.dumps({"error": {"code": code, "message": message}}).encode()
+    raw = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
+    raw += [(k.lower().encode(), v.encode()) for k, v in (headers or {}).items()]
+    await send(
+        {"type": "http.response.start", "status": status, "headers": [*raw, (b"connection", b"close")]}
+    )
+    await send({"type": "http.response.body", "body": body})
+
+
 class RefuseEncodedBodies:
     """ASGI middleware: 415 for a request body with a Content-Encoding (gzip, deflate...).
 
@@ -89,28 +103,75 @@ class RefuseEncodedBodies:
             headers = dict(scope.get("headers") or [])
             encoding = headers.get(b"content-encoding", b"identity").strip().lower()
             if encoding not in (b"", b"identity"):
-                body = json.dumps(
-                    {
-                        "error": {
-                            "code": "unsupported_encoding",
-                            "message": "compressed request bodies are not accepted: send the file as is",
-                        }
-                    }
-                ).encode()
-                await send(
-                    {
-                        "type": "http.response.start",
-                        "status": 415,
-                        "headers": [
-                            (b"content-type", b"application/json"),
-                            (b"content-length", str(len(body)).encode()),
-                            (b"connection", b"close"),
-                        ],
-                    }
-                )
-                await send({"type": "http.response.body", "body": body})
+                message = "compressed request bodies are not accepted: send the file as is"
+                await send_error(send, 415, "unsupported_encoding", message)
                 return
         await self.app(scope, receive, send)
+
+
+class UploadStalled(Exception):
+    """Raised from `receive` when a request body makes no progress (never an OSError/TimeoutError,
+    which the app's own handlers would turn into a response first)."""
+
+
+class GuardUploads:
+    """ASGI middleware for request bodies (POST/PUT/PATCH): at most `max_concurrent` read at once (the
+    next is 503 + Retry-After before a byte is read) and `timeout_s` at most between two chunks (408).
+
+    A stalled or trickling client used to hold its connection, and the memory of what it had sent,
+    for as long as it liked. The slot is freed as soon as the body is complete: what follows (the
+    query pool) has admission control of its own.
+    """
+
+    METHODS = ("POST", "PUT", "PATCH")
+
+    def __init__(self, app, max_concurrent: int, timeout_s: float, retry_after_s: int = 5) -> None:
+        self.app = app
+        self.max_concurrent = max_concurrent
+        self.timeout_s = timeout_s
+        self.retry_after_s = retry_after_s
+        self.active = 0
+
+    async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] != "http" or scope["method"] not in self.METHODS:
+            await self.app(scope, receive, send)
+            return
+        if self.active >= self.max_concurrent:
+            message = f"{self.max_concurrent} uploads are being received already; retry shortly"
+            await send_error(send, 503, "busy", message, {"Retry-After": str(self.retry_after_s)})
+            return
+        self.active += 1
+        state = {"reading": True, "started": False}
+
+        def done_reading() -> None:
+            if state["reading"]:
+                state["reading"] = False
+                self.active -= 1
+
+        async def timed_receive():
+            if not state["reading"]:  # the body is in: waiting for a disconnect is not a stall
+                return await receive()
+            try:
+                message = await asyncio.wait_for(receive(), self.timeout_s)
+            except TimeoutError:
+                raise UploadStalled from None
+            if message["type"] != "http.request" or not message.get("more_body", False):
+                done_reading()
+            return message
+
+        async def tracking_send(message) -> None:
+            if message["type"] == "http.response.start":
+                state["started"] = True
+            await send(message)
+
+        try:
+            await self.app(scope, timed_receive, tracking_send)
+        except UploadStalled:
+            if not state["started"]:
+                message = f"no upload data for {self.timeout_s:g} s: the request was given up"
+                await send_error(send, 408, "upload_timeout", message)
+        finally:
+            done_reading()
 
 
 def check_data_dir(data_dir: Path) -> None:
