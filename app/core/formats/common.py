@@ -27,26 +27,37 @@ def numbers(lines: list[bytes], what: str) -> tuple[np.ndarray, np.ndarray]:
     a Python loop; a line that itself holds 'nan' (or 'inf') is counted by splitting instead.
     Raises InvalidMeshError naming `what` when a token is not a number.
     """
+    return _ragged(lines, what, b" nan ", np.float64)
+
+
+def indices(lines: list[bytes], what: str) -> tuple[np.ndarray, np.ndarray]:
+    """Like numbers() for lines of 1-based indices -> int64 values; '0' (never a valid index) is the
+    sentinel, and ints parse faster than floats."""
+    return _ragged(lines, what, b" 0 ", np.int64)
+
+
+def _ragged(lines: list[bytes], what: str, sentinel: bytes, dtype: type) -> tuple[np.ndarray, np.ndarray]:
     if not lines:
-        return np.zeros(0), np.zeros(0, dtype=np.int64)
-    values = _fromstring(b" nan ".join(lines), what)
-    marks = np.flatnonzero(np.isnan(values))
+        return np.zeros(0, dtype=dtype), np.zeros(0, dtype=np.int64)
+    values = _fromstring(sentinel.join(lines), what, dtype)
+    is_mark = np.isnan(values) if dtype is np.float64 else values == 0
+    marks = np.flatnonzero(is_mark)
     if marks.size == len(lines) - 1:
         bounds = np.concatenate([[-1], marks, [values.size]])
         widths = np.diff(bounds) - 1
         return np.delete(values, marks), widths.astype(np.int64)
     widths = np.fromiter((len(line.split()) for line in lines), dtype=np.int64, count=len(lines))
-    values = _fromstring(b" ".join(lines), what)
+    values = _fromstring(b" ".join(lines), what, dtype)
     if values.size != widths.sum():
         raise InvalidMeshError(f"{what} holds something that is not a number")
     return values, widths
 
 
-def _fromstring(text: bytes, what: str) -> np.ndarray:
+def _fromstring(text: bytes, what: str, dtype: type = np.float64) -> np.ndarray:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error", DeprecationWarning)  # a partial parse warns: make it fail
-            return np.fromstring(text, sep=" ")
+            return np.fromstring(text, dtype=dtype, sep=" ")
     except (ValueError, DeprecationWarning):
         raise InvalidMeshError(f"{what} holds something that is not a number") from None
 

@@ -10,7 +10,7 @@ import re
 
 import numpy as np
 
-from app.core.formats.common import fan_triangulate, first_columns, numbers, text_lines, whole_numbers
+from app.core.formats.common import fan_triangulate, first_columns, indices, numbers, text_lines
 from app.core.meshdata import Budget, InvalidMeshError
 
 _V = re.compile(rb"^[ \t]*v[ \t]+([^\n]*)", re.M)
@@ -37,8 +37,7 @@ def read_obj(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
     # each line has its own width: 'v x y z' and 'v x y z r g b' may be mixed in one file
     vertices = first_columns(values, widths, 3, "an OBJ vertex line")
     face_text = [_SLASH.sub(b"", line) if b"/" in line else line for line in f_lines]
-    raw, corners = numbers(face_text, "an OBJ face line")
-    index = whole_numbers(raw, "an OBJ face index")
+    index, corners = indices(face_text, "an OBJ face line")
     if index.size and (index == 0).any():
         raise InvalidMeshError("an OBJ face refers to vertex 0, but OBJ counts vertices from 1")
     budget.faces(int((corners - 2).clip(min=1).sum()), "the OBJ file")
