@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
+import asyncio
 from pathlib import Path
 
-from app.core.mesh import load_mesh
+from app.services import rendering
 from app.services.context import ServiceContext
-from app.services.errors import InvalidInputError
-from app.services.thumbnails import render_png
+from app.services.query_pool import QueryDescriber
 from app.storage import jobs as jobs_repo
 from app.storage import vocabularies as vocab_repo
 from app.storage.blobs import atomic_write
@@ -36,14 +36,13 @@ def live_workers(ctx: ServiceContext) -> int:
         return jobs_repo.live_workers(conn, within_s=max(10.0, ctx.settings.lease_seconds))
 
 
-def thumbnail_file(ctx: ServiceContext, model: ModelRecord, size: int) -> Path:
-    """The cached PNG rendering of a stored mesh, rendered on first request."""
-    path = ctx.blobs.thumbnail_path(model.id, size)
+async def thumbnail_file(ctx: ServiceContext, pool: QueryDescriber, model: ModelRecord, size: int) -> Path:
+    """The cached PNG rendering of a stored mesh, rendered on first request in a pool process (under
+    its memory cap and time limit) at one of rendering.THUMBNAIL_SIZES."""
+    path = ctx.blobs.thumbnail_path(model.id, rendering.check_size(size))
     if not path.is_file():
-        mesh_path = ctx.blobs.mesh_path(model.sha256, model.file_type)
-        try:
-            mesh = load_mesh(mesh_path, model.file_type, max_vertices=ctx.settings.max_vertices)
-        except ValueError as exc:
-            raise InvalidInputError(f"model {model.id} has no renderable mesh: {exc}") from exc
-        atomic_write(path, render_png(mesh.vertices, mesh.faces, size))
+        mesh_path = str(ctx.blobs.mesh_path(model.sha256, model.file_type))
+        args = (mesh_path, model.file_type, ctx.settings.max_vertices, size, model.id)
+        png = await pool.run(rendering.render_stored, args, "rendering the thumbnail")
+        await asyncio.to_thread(atomic_write, path, png)
     return path

@@ -51,7 +51,9 @@ def describe_bytes(
 
 def init_process(parent_pid: int, memory_mb: int) -> None:
     """Initializer of each pool process: die with the server, one BLAS thread, capped memory."""
-    die_with_parent(parent_pid)
+    # no PDEATHSIG: a slot's process starts on first use, from whichever thread submits (under
+    # TestClient a per-request thread), and PDEATHSIG would fire when that thread ends
+    die_with_parent(parent_pid, pdeathsig=False)
     pin_threads()
     cap_memory(memory_mb)
 
@@ -106,8 +108,8 @@ class QueryDescriber:
 
     async def _call(self, slot: int, fn: Callable[..., Any], args: tuple, what: str, timeout_s: float) -> Any:
         loop = asyncio.get_running_loop()
-        future = loop.run_in_executor(self._slots[slot], fn, *args)
         try:
+            future = loop.run_in_executor(self._slots[slot], fn, *args)  # raises if already broken
             return await asyncio.wait_for(future, timeout_s)
         except TimeoutError:
             self._restart(slot)  # only this request's process: the others keep working

@@ -27,9 +27,13 @@ def parent_alive(parent_pid: int) -> bool:
     return os.getppid() == parent_pid
 
 
-def die_with_parent(parent_pid: int) -> None:
-    """Call first thing in a child: SIGTERM when the parent dies (prctl) plus a getppid() watcher."""
-    if sys.platform.startswith("linux"):
+def die_with_parent(parent_pid: int, pdeathsig: bool = True) -> None:
+    """Call first thing in a child: SIGTERM when the parent dies (prctl) plus a getppid() watcher.
+
+    pdeathsig=False for children that may be spawned from a short-lived thread (the kernel would
+    signal them when that thread ends, with the parent alive): the watcher alone covers them.
+    """
+    if pdeathsig and sys.platform.startswith("linux"):
         try:
             libc = ctypes.CDLL(None, use_errno=True)
             libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)

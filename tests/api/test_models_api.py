@@ -93,9 +93,10 @@ def test_bad_uploads_get_clear_errors_and_change_nothing(data_dir, corpus, tmp_p
     settings = make_settings(data_dir, max_upload_bytes=20_000)
     with TestClient(create_app(settings)) as client:
         before = client.get("/models").json()["count"]
-        r = client.post("/models", files={"file": ("shape.xyz", b"v 0 0 0\n")})
-        assert r.status_code == 422 and r.json()["error"]["code"] == "invalid_input"
-        assert "unsupported mesh format" in r.json()["error"]["message"]
+        for route in ("/models", "/search"):  # one extension check, one answer, on both doors
+            r = client.post(route, files={"file": ("shape.xyz", b"v 0 0 0\n")})
+            assert r.status_code == 415 and r.json()["error"]["code"] == "unsupported_format", route
+            assert "unsupported mesh format" in r.json()["error"]["message"]
         big = b"v 0 0 0\n" * 5000  # 40 kB > 20 kB
         r = client.post("/models", files={"file": ("big.obj", big)})
         assert r.status_code == 413 and r.json()["error"]["code"] == "payload_too_large"

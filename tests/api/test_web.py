@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import io
 import re
+from collections.abc import Iterator
+from types import SimpleNamespace
 
 import pytest
 import trimesh
@@ -14,16 +16,24 @@ from PIL import Image
 from app.api import errors
 from app.api.routes import web
 from app.config import Settings
+from app.core.pipeline import DescribeParams
+from app.services import rendering
+from app.services.query_pool import QueryDescriber
 
 
 @pytest.fixture(scope="module")
-def client(tmp_path_factory: pytest.TempPathFactory) -> TestClient:
+def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     app = FastAPI()
     data_dir = tmp_path_factory.mktemp("d")
-    app.state.settings = Settings(data_dir=data_dir, dev_mode=True, max_upload_bytes=200_000)
+    settings = Settings(data_dir=data_dir, dev_mode=True, max_upload_bytes=200_000)
+    app.state.settings = settings
+    # the preview renders in a query-pool process: the one piece of the runtime these routes use
+    describer = QueryDescriber(1, DescribeParams(), settings.max_vertices, 60.0)
+    app.state.runtime = SimpleNamespace(ctx=SimpleNamespace(settings=settings), describer=describer)
     errors.install(app)
     app.include_router(web.router)
-    return TestClient(app)
+    yield TestClient(app)
+    describer.close()
 
 
 def _obj(mesh: trimesh.Trimesh) -> bytes:
@@ -66,7 +76,7 @@ def test_preview_renders_the_uploaded_mesh(client: TestClient) -> None:
     r = client.post("/web/preview.png", files={"file": ("ball.obj", data)})
     assert r.status_code == 200 and r.headers["content-type"] == "image/png"
     image = Image.open(io.BytesIO(r.content))
-    assert image.size == (web.PREVIEW_SIZE, web.PREVIEW_SIZE)
+    assert image.size == (rendering.PREVIEW_SIZE, rendering.PREVIEW_SIZE)
     assert image.getchannel("A").getextrema() == (0, 255)  # something drawn on a transparent ground
 
 

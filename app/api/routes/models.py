@@ -23,7 +23,7 @@ from app.api.schemas import (
     SearchResponse,
 )
 from app.api.uploads import multipart_body, read_form
-from app.services import catalog, ingestion, maintenance, metadata, search
+from app.services import catalog, ingestion, maintenance, metadata, rendering, search
 from app.services.errors import InvalidInputError
 
 router = APIRouter(prefix="/models", tags=["models"])
@@ -121,11 +121,19 @@ def similar(
 
 
 @router.get("/{model_id}/thumbnail.png", responses=ERRORS, response_class=Response)
-def thumbnail(model_id: IdPath, ctx: CtxDep, size: Annotated[int, Query(ge=32, le=1024)] = 256) -> Response:
-    """A server-side rendering of the stored mesh (cached under the data directory)."""
-    path = maintenance.thumbnail_file(ctx, catalog.get_model(ctx, model_id), size)
+async def thumbnail(
+    model_id: IdPath,
+    runtime: RuntimeDep,
+    size: Annotated[
+        int, Query(description="pixels", json_schema_extra={"enum": list(rendering.THUMBNAIL_SIZES)})
+    ] = rendering.PREVIEW_SIZE,
+) -> Response:
+    """A server-side rendering of the stored mesh (cached under the data directory; 128, 256 or 512)."""
+    rendering.check_size(size)
+    model = await run_in_threadpool(catalog.get_model, runtime.ctx, model_id)
+    path = await maintenance.thumbnail_file(runtime.ctx, runtime.describer, model, size)
     return Response(
-        path.read_bytes(),
+        await run_in_threadpool(path.read_bytes),
         media_type="image/png",
         headers={"Cache-Control": "public, max-age=86400, immutable"},
     )

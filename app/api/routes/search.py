@@ -12,7 +12,6 @@ from app.api.deps import RuntimeDep
 from app.api.routes.models import ERRORS, to_response
 from app.api.schemas import SearchResponse
 from app.api.uploads import multipart_body, read_form
-from app.core.mesh import detect_format
 from app.services import search
 from app.services.errors import InvalidInputError
 
@@ -43,7 +42,7 @@ async def search_mesh(request: Request, runtime: RuntimeDep) -> SearchResponse:
     runtime.live.require()  # fail fast, before the expensive part, when nothing can answer
     seconds = {"upload": time.perf_counter() - t}
     t = time.perf_counter()
-    description, stages = await runtime.describer.describe(data, detect_format(filename))
+    description, stages = await runtime.describer.describe(data, limits.upload_format(filename))
     describe_wall = time.perf_counter() - t
     runtime.metrics.describe_seconds.labels("query").observe(describe_wall)
     seconds.update({f"describe.{name}": v for name, v in stages.items()})

@@ -12,21 +12,16 @@ import mimetypes
 from pathlib import Path
 
 from fastapi import APIRouter, Request, Response
-from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse
 
-from app.api.deps import SettingsDep
+from app.api.deps import RuntimeDep
+from app.api.limits import upload_format
 from app.api.uploads import read_form
-from app.core.mesh import detect_format
-from app.core.resolution import simplify
 from app.services.errors import NotFoundError
-from app.services.mesh_policy import load_upload
-from app.services.thumbnails import render_png
+from app.services.rendering import render_upload
 
 router = APIRouter(tags=["web"])
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
-PREVIEW_SIZE = 256
-PREVIEW_MAX_VERTICES = 100_000  # previews of bigger meshes are rendered from a decimated copy
 
 
 @router.get("/", include_in_schema=False)
@@ -51,16 +46,13 @@ def static(name: str) -> FileResponse:
 
 
 @router.post("/web/preview.png", response_class=Response, include_in_schema=False)
-async def preview(request: Request, settings: SettingsDep) -> Response:
-    """Render the uploaded mesh (multipart `file`) as the page's query thumbnail; nothing is stored."""
+async def preview(request: Request, runtime: RuntimeDep) -> Response:
+    """Render the uploaded mesh (multipart `file`) as the page's query thumbnail; nothing is stored.
+
+    Decoding and rendering run in a query-pool process (memory cap, time limit), never in this one."""
+    settings = runtime.ctx.settings
     form = await read_form(request, settings.max_upload_bytes)
     filename, data = form.file("file")
-    png = await run_in_threadpool(_render, data, detect_format(filename), settings.max_vertices)
+    args = (data, upload_format(filename), settings.max_vertices)
+    png = await runtime.describer.run(render_upload, args, "rendering the preview")
     return Response(png, media_type="image/png", headers={"Cache-Control": "no-store"})
-
-
-def _render(data: bytes, file_type: str, max_vertices: int) -> bytes:
-    mesh = load_upload(data, file_type, max_vertices)  # InvalidMeshError -> 422 (what an upload would get)
-    if mesh.n_vertices > PREVIEW_MAX_VERTICES:
-        mesh = simplify(mesh, PREVIEW_MAX_VERTICES)
-    return render_png(mesh.vertices, mesh.faces, PREVIEW_SIZE)
