@@ -19,7 +19,8 @@ def test_seeded_models_are_ready_encoded_and_find_themselves(data_dir, corpus):
         ids, vectors, _ = vocab_repo.vectors(conn, active.id)
     assert counts == {"queued": 0, "ready": len(corpus.seeded), "failed": 0}
     assert active.size == TEST_WORDS and len(ids) == len(corpus.seeded)
-    np.testing.assert_allclose(vectors.sum(axis=1), 1.0, atol=1e-5)  # normalised BoF
+    s_bof = active.metadata["fusion"]["bof"]  # the vectors are BoF / s_bof, then the scaled Shape-DNA
+    np.testing.assert_allclose(vectors[:, :TEST_WORDS].sum(axis=1) * s_bof, 1.0, atol=1e-5)  # normalised BoF
     live = LiveIndex(ctx)
     live.refresh()
     for mid, vec in zip(ids, vectors, strict=True):
