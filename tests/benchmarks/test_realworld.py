@@ -1,0 +1,75 @@
+"""The realworld and large-input benchmarks run end to end on 2-3 files (no timing assertions)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from benchmarks import common, large_inputs, realworld
+
+needs_corpus = pytest.mark.skipif(
+    not realworld.CORPUS.is_dir(), reason="the realworld corpus is not on this machine (../shared)"
+)
+
+
+@pytest.fixture(autouse=True)
+def _results_in_tmp(tmp_path, monkeypatch):
+    monkeypatch.setattr(common, "RESULTS_DIR", tmp_path / "results")
+
+
+def _json(tmp_path, name: str) -> dict:
+    return json.loads((tmp_path / "results" / f"{name}.json").read_text())
+
+
+def test_percentiles_interpolate_like_numpy():
+    assert realworld.percentile([4.0, 1.0, 3.0, 2.0], 50) == 2.5
+    assert realworld.percentile([1.0, 2.0, 3.0, 4.0, 5.0], 90) == pytest.approx(4.6)
+    assert realworld.distribution([2.0])["max"] == 2.0
+
+
+def test_summary_counts_outcomes_and_files_outside_the_band():
+    rows = [
+        {"file": "a", "outcome": "described", "describe_s": 0.5, "describe_cpu_s": 0.4,
+         "vertices_solved": 1600, "target": 1000},
+        {"file": "b", "outcome": "described", "describe_s": 0.1, "describe_cpu_s": 0.1,
+         "vertices_solved": 900, "target": 1000},
+        {"file": "c", "outcome": "refused", "message": "the file is empty"},
+        {"file": "d", "outcome": "timeout"},
+    ]
+    s = realworld.summarise(rows)
+    assert s["counts"] == {"described": 2, "refused": 1, "error": 0, "crash": 0, "timeout": 1}
+    assert s["solved_above_band"] == ["a"] and s["solved_below_band"] == []
+    assert s["slowest"] == "a" and s["describe_s"]["max"] == 0.5
+
+
+@pytest.mark.slow
+@needs_corpus
+def test_realworld_benchmark_describes_refuses_and_zips_folders(tmp_path, capsys):
+    code = realworld.main(["--files", "oded__wingnut.obj", "--files", "trimesh__empty.stl",
+                           "--files", "gltf_fox", "--name", "rw-smoke"])
+    out = capsys.readouterr().out
+    assert "describe seconds" in out and "oded__wingnut.obj" in out
+    doc = _json(tmp_path, "rw-smoke")
+    rows = {r["file"]: r for r in doc["rows"]}
+    assert set(rows) == {"oded__wingnut.obj", "trimesh__empty.stl", "gltf_fox"}
+    wingnut = rows["oded__wingnut.obj"]
+    assert wingnut["outcome"] == "described"
+    assert wingnut["target"] / 1.5 <= wingnut["vertices_solved"] <= 1.5 * wingnut["target"]
+    assert rows["trimesh__empty.stl"]["outcome"] == "refused" and rows["trimesh__empty.stl"]["message"]
+    assert rows["gltf_fox"]["outcome"] in ("described", "refused")  # whatever the loader says of a .zip
+    assert sum(doc["summary"]["counts"].values()) == 3
+    assert code == 0
+
+
+@pytest.mark.slow
+@needs_corpus
+def test_large_inputs_benchmark_runs_ours_and_the_baseline(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(large_inputs, "SIZES", {"tiny": ("oded__wingnut.obj", 1)})  # 3k -> 12k vertices
+    assert large_inputs.main(["--sizes", "tiny", "--baseline", "--name", "large-smoke"]) == 0
+    assert "peak_mb" in capsys.readouterr().out
+    rows = _json(tmp_path, "large-smoke")["rows"]
+    assert [r["simplify"] for r in rows] == ["legacy", "ours"]
+    for r in rows:
+        assert r["outcome"] == "described" and r["vertices_in"] > 10_000
+        assert r["peak_mb"] >= r["load_peak_mb"] >= r["base_mb"] > 0
