@@ -63,7 +63,7 @@ class Settings(BaseSettings):
     search_queue: int = Field(default=8, ge=0)  # requests waiting for a busy pool before 503
     worker_memory_mb: int = Field(default=4096, ge=0)  # RLIMIT_AS of worker and pool processes; 0: none
     upload_timeout_s: float = Field(default=30.0, gt=0)  # no body bytes for this long: 408
-    max_concurrent_uploads: int = Field(default=32, ge=1)  # request bodies read at once; more: 503
+    max_concurrent_uploads: int = Field(default=16, ge=1)  # request bodies read at once; more: 503
     warm_up: bool = True  # start the query pool at startup, so the first search does not pay for it
     admin_token: str = DEFAULT_ADMIN_TOKEN
     api_token: str = ""  # set: POST /models and DELETE /models/{id} need it (or the admin token)
