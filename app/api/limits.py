@@ -76,15 +76,15 @@ def check_form(form: UploadForm, file_field: str = "file") -> None:
 
 
 async def send_error(
-    send, status: int, code: str, message: str, headers: dict[str, str] | None = None
+    send, status: int, code: str, message: str, headers: dict[str, str] | None = None, close: bool = True
 ) -> None:
-    """A JSON error response sent straight from ASGI middleware, closing the connection."""
+    """A JSON error response sent straight from ASGI middleware (closing the connection unless told)."""
     body = json.dumps({"error": {"code": code, "message": message}}).encode()
     raw = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
     raw += [(k.lower().encode(), v.encode()) for k, v in (headers or {}).items()]
-    await send(
-        {"type": "http.response.start", "status": status, "headers": [*raw, (b"connection", b"close")]}
-    )
+    if close:
+        raw.append((b"connection", b"close"))
+    await send({"type": "http.response.start", "status": status, "headers": raw})
     await send({"type": "http.response.body", "body": body})
 
 
@@ -124,6 +124,7 @@ class GuardUploads:
     """
 
     METHODS = ("POST", "PUT", "PATCH")
+    DRAIN_BYTES = 1 << 20  # a refused body up to this size is read and dropped, so the 503 arrives
 
     def __init__(self, app, max_concurrent: int, timeout_s: float, retry_after_s: int = 5) -> None:
         self.app = app
@@ -137,8 +138,12 @@ class GuardUploads:
             await self.app(scope, receive, send)
             return
         if self.active >= self.max_concurrent:
+            # a client still sending when the server closes gets a reset, not the 503: drop a small
+            # body first (nothing is kept), close on a big or stalled one
+            drained = await self._drain(receive)
             message = f"{self.max_concurrent} uploads are being received already; retry shortly"
-            await send_error(send, 503, "busy", message, {"Retry-After": str(self.retry_after_s)})
+            headers = {"Retry-After": str(self.retry_after_s)}
+            await send_error(send, 503, "busy", message, headers, close=not drained)
             return
         self.active += 1
         state = {"reading": True, "started": False}
@@ -172,6 +177,21 @@ class GuardUploads:
                 await send_error(send, 408, "upload_timeout", message)
         finally:
             done_reading()
+
+    async def _drain(self, receive) -> bool:
+        """Read and discard the body; True if it ended within DRAIN_BYTES and the time limit."""
+        size = 0
+        while size <= self.DRAIN_BYTES:
+            try:
+                message = await asyncio.wait_for(receive(), self.timeout_s)
+            except TimeoutError:
+                return False
+            if message["type"] != "http.request":
+                return False
+            size += len(message.get("body", b""))
+            if not message.get("more_body", False):
+                return size <= self.DRAIN_BYTES
+        return False
 
 
 def check_data_dir(data_dir: Path) -> None:

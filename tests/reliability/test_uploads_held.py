@@ -76,7 +76,7 @@ def test_a_stalled_body_gets_408_and_frees_its_slot():
     asyncio.run(scenario())
 
 
-def test_past_the_cap_the_next_upload_is_503_before_its_body_is_read_and_gets_are_never_held():
+def test_past_the_cap_the_next_upload_is_503_and_its_body_never_reaches_the_app():
     guard = GuardUploads(_echo_app, max_concurrent=2, timeout_s=60)
 
     async def scenario():
@@ -91,8 +91,16 @@ def test_past_the_cap_the_next_upload_is_503_before_its_body_is_read_and_gets_ar
             return {"type": "http.request", "body": b"", "more_body": False}
 
         refused = await _call(guard, untouched)
-        assert _status(refused) == 503 and reads == []
-        assert dict(refused[0]["headers"])[b"retry-after"] == b"5"
+        assert _status(refused) == 503 and reads == [1]  # a small body is dropped, never handed on...
+        headers = dict(refused[0]["headers"])
+        assert headers[b"retry-after"] == b"5" and b"connection" not in headers  # ...so the 503 arrives
+
+        async def endless():  # a big refused body is not read to its end: the connection is closed
+            return {"type": "http.request", "body": b"x" * 65536, "more_body": True}
+
+        big = await _call(guard, endless)
+        assert _status(big) == 503 and dict(big[0]["headers"])[b"connection"] == b"close"
+        assert guard.active == 2
         assert _status(await _call(guard, untouched, method="GET")) == 200  # reads are not uploads
         release.set()
         assert [_status(m) for m in await asyncio.gather(*held)] == [200, 200]
