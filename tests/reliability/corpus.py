@@ -157,7 +157,11 @@ def build() -> list[BadInput]:
         BadInput("huge-coord-obj", "huge.obj", _bad_obj_values(1e308).replace(b"1e+308", b"1e999")),
         BadInput("nan-stl", "nan.stl", _nan_stl()),
         BadInput("face-missing-vertex", "holes.obj", obj_text(s.vertices, s.faces) + b"f 1 2 999\n"),
-        BadInput("face-index-zero", "zero.obj", obj_text(s.vertices[:3], None) + b"f 0 1 2\nf 1 2 3\n"),
+        # on a whole mesh, so the refusal is the 0 (OBJ counts from 1) and not "too few vertices"
+        *(
+            BadInput(f"face-index-zero-{i}", "zero.obj", obj_text(s.vertices, s.faces) + face)
+            for i, face in enumerate((b"f 0 1 2\n", b"f 1 0 2\n", b"f 3 4 0\n"))
+        ),
         BadInput(
             "face-missing-vertex-off",
             "holes.off",
@@ -217,7 +221,23 @@ def build() -> list[BadInput]:
         BadInput(
             "invalid-utf8-label", "ok.obj", good, {"label": b"caf\xe9 (latin-1, not UTF-8)"}, file_level=False
         ),
+        BadInput("filename-256-chars", "n" * 252 + ".obj", good, file_level=False),
+        BadInput("filename-1000-chars", "n" * 996 + ".obj", good, file_level=False),
     ]
+    # one case per refused character class, in the file name, the name and the label
+    odd = {
+        "control": "\x07",
+        "format-zwsp": "\u200b",
+        "format-bom": "\ufeff",
+        "private-use": "\ue000",
+        "private-use-plane-15": "\U000f0001",
+    }
+    for what, ch in odd.items():
+        cases += [
+            BadInput(f"{what}-in-filename", f"a{ch}b.obj", good, file_level=False),
+            BadInput(f"{what}-in-name", "ok.obj", good, {"name": f"a{ch}b"}, file_level=False),
+            BadInput(f"{what}-in-label", "ok.obj", good, {"label": f"a{ch}b"}, file_level=False),
+        ]
     return cases
 
 
