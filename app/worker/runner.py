@@ -54,6 +54,9 @@ class Worker:
             self._handlers[job.kind](job, lambda: None)
         except PERMANENT as exc:
             self._fail(job, str(exc))
+        except MemoryError:  # RLIMIT_AS (SHAPEBAG_WORKER_MEMORY_MB): the same input would hit it again
+            limit = s.worker_memory_mb
+            self._fail(job, f"the job needs more memory than the worker limit of {limit} MB")
         except Exception as exc:  # a bug or a transient fault: retry while attempts remain
             log.error("job %d failed: %s", job.id, traceback.format_exc())
             reason = f"{type(exc).__name__}: {exc}"

@@ -15,6 +15,7 @@ from app.main import create_app
 from app.services import ingestion
 from app.services.context import open_context
 from app.storage import jobs as jobs_repo
+from app.storage import models as models_repo
 from app.worker.processes import WorkerPool
 from app.worker.runner import Worker
 from tests.conftest import make_settings, wait_for
@@ -79,3 +80,21 @@ def test_worker_names_differ_across_containers_whose_parents_share_a_pid(monkeyp
         names |= {processes.process_name("worker", slot) for slot in range(2)}
     assert len(names) == 4
     assert processes.process_name("worker", 0) == "worker@8e1b44c0a9f2-1-0"
+
+
+def test_a_job_past_the_worker_memory_cap_fails_once_with_the_reason(settings, corpus, monkeypatch):
+    """MemoryError (RLIMIT_AS in a worker process) is not transient: no retries, a clear reason."""
+    ctx = open_context(settings)
+    path, _ = corpus.seeded[0]
+    sub = ingestion.submit(ctx, path.read_bytes(), path.name)
+
+    def too_big(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr(ingestion, "describe", too_big)
+    Worker(ctx, "capped").run_forever(exit_when_idle=True)
+    with ctx.db.read() as conn:
+        job = jobs_repo.get(conn, sub.job_id)
+        model = models_repo.get(conn, sub.model.id)
+    assert job.state == "failed" and job.attempts == 1
+    assert model.status == "failed" and f"worker limit of {settings.worker_memory_mb} MB" in model.error
