@@ -40,7 +40,7 @@ def validate(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     mesh = Mesh(vertices.astype(np.float64, copy=False), faces.astype(np.int64, copy=False))
     mask = np.zeros(mesh.n_vertices, dtype=bool)
     mask[mesh.faces.ravel()] = True
-    used = mesh.vertices[mask]  # unreferenced stray points must not set the scale
+    used = mesh.vertices if mask.all() else mesh.vertices[mask]  # stray points must not set the scale
     biggest = float(np.abs(used).max())
     if biggest > MAX_COORDINATE:
         raise InvalidMeshError(
@@ -56,9 +56,9 @@ def validate(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
             f"the mesh is too small (it spans {extent:.3g}; at least {MIN_EXTENT:g}):"
             " scale the model up before exporting it"
         )
-    # the area test in units of the mesh's own size: scale invariant, no over- or underflow
-    unit = (mesh.vertices - lo) / extent
-    if not float(_face_areas(unit, mesh.faces).sum()) > 1e-12:
+    # the area test in units of the mesh's own size: scale invariant; within these bounds on the
+    # coordinates, areas neither overflow nor underflow in float64
+    if not float(_face_areas(mesh.vertices, mesh.faces).sum()) > 1e-12 * extent * extent:
         raise InvalidMeshError("the mesh has zero total area (all faces are degenerate)")
     return mesh
 
@@ -122,24 +122,48 @@ def merge_vertices(
     no face uses are dropped. Positions are snapped to a grid anchored at the bounding box's corner
     (translation and scale invariant: 1e8 cells per side fit int64 whatever the units). Copies of one
     vertex are bit-identical and always meet; two distinct positions closer than the tolerance meet
-    unless a grid line falls between them. A 64-bit hash of each cell decides quickly that there are
-    no duplicates (the usual case); only when two hashes collide does the exact row comparison run.
+    unless a grid line falls between them. Cells are grouped by a 64-bit hash of their coordinates (one
+    1-D sort); the grouping is then checked exactly, and a hash collision falls back to a row sort.
     """
     vertices, faces = drop_unreferenced(vertices, faces)
     lo = vertices.min(axis=0)
     side = float((vertices.max(axis=0) - lo).max())
     cell = tolerance * side if side > 0 else 1.0
-    keys = np.floor((vertices - lo) / cell + 0.5).astype(np.int64)  # (n, 3), each in [0, 1e8]
+    grid = vertices - lo  # in place from here: this runs on every raw corner of a large STL
+    grid /= cell
+    grid += 0.5
+    keys = np.floor(grid, out=grid).astype(np.int64)  # (n, 3), each in [0, 1e8]
+    del grid
     with np.errstate(over="ignore"):
         h = keys[:, 0] * np.int64(-7046029254386353131)
         h = (h ^ keys[:, 1]) * np.int64(0x100000001B3)
         h = (h ^ keys[:, 2]) * np.int64(-4417276706812531889)
-    if np.unique(h).size == h.size:
+    _, first, inverse = np.unique(h, return_index=True, return_inverse=True)
+    if first.size == h.size:  # the usual case: no duplicates
         return vertices, faces
-    from trimesh.grouping import unique_rows
+    inverse = inverse.ravel()
+    if not np.array_equal(keys[first][inverse], keys):  # two cells share a hash (~n^2 / 2^64): be exact
+        first, inverse = _groups(keys)
+    unique, inverse = _in_input_order(first, inverse)
+    return vertices[unique], inverse[faces]
 
-    unique, inverse = unique_rows(keys, keep_order=True)
-    return vertices[unique], inverse[faces].astype(np.int64)
+
+def _groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """keys (n, k) int64 -> first (g,) index of each distinct row, inverse (n,) group of each row."""
+    order = np.lexsort(keys.T[::-1])  # stable: the first row of each run is the smallest index
+    sorted_keys = keys[order]
+    starts = np.ones(len(keys), dtype=bool)
+    starts[1:] = (sorted_keys[1:] != sorted_keys[:-1]).any(axis=1)
+    inverse = np.empty(len(keys), dtype=np.int64)
+    inverse[order] = np.cumsum(starts) - 1
+    return order[starts], inverse
+
+
+def _in_input_order(first: np.ndarray, inverse: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Renumber groups by first appearance -> (sorted first indices, inverse in the new numbering)."""
+    rank = np.empty(first.size, dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(first.size)
+    return np.sort(first), rank[inverse]
 
 
 def drop_unreferenced(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -156,11 +180,11 @@ def drop_unreferenced(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarr
 def unique_face_index(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """Sorted indices of the first occurrence of each face (faces equal as vertex sets)."""
     s = np.sort(faces, axis=1)
-    if n_vertices < 2**20:  # the sorted triple packs exactly into one int64
-        key = (s[:, 0] << 40) | (s[:, 1] << 20) | s[:, 2]
+    if n_vertices <= 2**21:  # the sorted triple packs exactly into one int64 (3 x 21 bits)
+        key = (s[:, 0] << 42) | (s[:, 1] << 21) | s[:, 2]
         _, first = np.unique(key, return_index=True)
     else:
-        _, first = np.unique(s, axis=0, return_index=True)
+        first = _groups(s)[0]
     return np.sort(first)
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from app.core.cleaning import face_components
+from app.core.cleaning import _groups, face_components, merge_vertices, unique_face_index
 from app.core.mesh import InvalidMeshError, Mesh, clean, load_mesh, validate
 from app.core.pipeline import DescribeParams, describe
 
@@ -202,3 +202,31 @@ def test_messages_are_sentences_not_internals():
     with pytest.raises(InvalidMeshError) as err:
         clean(validate(np.random.default_rng(1).normal(size=(9, 3)), np.arange(9).reshape(-1, 3)))
     assert not re.search(r"Error|numpy|index \d+ is out of bounds|Traceback", str(err.value))
+
+
+def test_row_grouping_matches_numpy_unique():
+    """The exact fallback of the welding hash (and of face dedup past 2^21 vertices) against np.unique."""
+    keys = np.random.default_rng(3).integers(0, 4, size=(2000, 3))
+    first, inverse = _groups(keys)
+    expected, expected_first = np.unique(keys, axis=0, return_index=True)
+    assert np.array_equal(keys[first][inverse], keys)  # every row maps to a row equal to it
+    assert np.array_equal(np.sort(first), np.sort(expected_first)) and len(first) == len(expected)
+
+
+def test_welding_keeps_input_order_and_every_face():
+    rng = np.random.default_rng(4)
+    v = rng.random((60, 3))
+    v = np.vstack([v, v[::-1]])  # each position twice
+    faces = rng.integers(0, 120, size=(300, 3))
+    welded, f = merge_vertices(v, faces)
+    assert np.array_equal(welded[f], v[faces])  # every corner where it was
+    assert len(welded) == len(np.unique(v[np.unique(faces)], axis=0))
+    first_seen = [np.flatnonzero((v == w).all(axis=1) & np.isin(np.arange(120), faces)).min() for w in welded]
+    assert first_seen == sorted(first_seen)
+
+
+def test_face_dedup_is_the_same_for_small_and_large_vertex_counts():
+    faces = np.random.default_rng(5).integers(0, 30, size=(500, 3))
+    faces = np.vstack([faces, faces[:, ::-1]])  # every face again, reversed
+    small, large = unique_face_index(faces, 30), unique_face_index(faces, 2**22)
+    assert np.array_equal(small, large) and np.all(small < 500)

@@ -25,10 +25,11 @@ def obj_bytes(vertices, faces) -> bytes:
     return ("\n".join(lines) + "\n").encode()
 
 
-@pytest.mark.parametrize("fmt", ["obj", "off", "ply", "stl", "glb"])
+@pytest.mark.parametrize("fmt", ["obj", "off", "ply", "stl", "glb", "gltf", "3mf"])
 def test_every_supported_format_round_trips(fmt):
     sphere = trimesh.creation.icosphere(subdivisions=2)
-    data = sphere.export(file_type=fmt)
+    data = sphere.export(file_type=fmt, **({"embed_buffers": True} if fmt == "gltf" else {}))
+    data = data["model.gltf"] if isinstance(data, dict) else data
     mesh = load_mesh(data if isinstance(data, bytes) else data.encode(), file_type=fmt)
     assert mesh.n_vertices == len(sphere.vertices)  # STL's duplicated corners are merged again
     assert np.isclose(mesh.area(), sphere.area, rtol=1e-5)
