@@ -409,3 +409,18 @@ def test_datauri_glb_round_trip():
         }
     ]
     assert load_mesh(glb(doc), "glb").n_faces == 4
+
+
+@pytest.mark.parametrize(("fmt", "where"), [("3mf", "the 3MF scene"), ("glb", "the glTF scene")])
+def test_placements_of_one_part_count_against_the_limit_before_they_are_copied(fmt, where):
+    """50 placements of one 42-vertex part: 2100 vertices, within 6 x 400 raw, over 6 x 300."""
+    part = trimesh.creation.icosphere(subdivisions=1)
+    scene = trimesh.Scene()
+    for i in range(50):
+        at = trimesh.transformations.translation_matrix([3 * i, 0, 0])
+        scene.add_geometry(part, geom_name="part", node_name=f"n{i}", transform=at)
+    data = scene.export(file_type=fmt)
+    assert len(data) < 20_000  # the part is stored once
+    assert n_components(load_mesh(data, fmt, max_vertices=2100)) == 50
+    with pytest.raises(InvalidMeshError, match=f"{where} .* declares 2100 vertices"):
+        load_mesh(data, fmt, max_vertices=300)

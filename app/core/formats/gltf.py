@@ -131,7 +131,7 @@ def _read(
         if isinstance(exc, InvalidMeshError):
             raise
         raise InvalidMeshError(f"could not read the file as {what}: its JSON structure is invalid") from exc
-    return load_with_trimesh(glb, "glb", what)
+    return load_with_trimesh(glb, "glb", what, budget)
 
 
 def _check_extensions(doc: dict) -> None:

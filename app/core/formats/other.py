@@ -12,12 +12,12 @@ from app.core.meshdata import Budget, InvalidMeshError
 def read_3mf(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
     """3MF: a zip of XML; every build item with its transform (trimesh, which needs lxml and networkx)."""
     open_zip(data, budget, "3MF").close()  # refuse a zip bomb before trimesh unpacks it
-    return load_with_trimesh(data, "3mf", "3MF")
+    return load_with_trimesh(data, "3mf", "3MF", budget)
 
 
 def read_dae(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
     """COLLADA: the visual scene's triangle geometry with node transforms (trimesh + pycollada)."""
-    return load_with_trimesh(data, "dae", "COLLADA")
+    return load_with_trimesh(data, "dae", "COLLADA", budget)
 
 
 def read_drc(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:

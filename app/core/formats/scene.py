@@ -7,23 +7,26 @@ import io
 import numpy as np
 import trimesh
 
-from app.core.meshdata import InvalidMeshError
+from app.core.meshdata import Budget, InvalidMeshError
 
 
-def load_with_trimesh(data: bytes, file_type: str, what: str) -> tuple[np.ndarray, np.ndarray]:
+def load_with_trimesh(
+    data: bytes, file_type: str, what: str, budget: Budget
+) -> tuple[np.ndarray, np.ndarray]:
     """Parse with trimesh (no processing) and flatten: every triangle mesh of the scene, node transforms
     applied, in one (vertices (n, 3) float64, faces (f, 3) int64) pair."""
     try:
         loaded = trimesh.load(io.BytesIO(data), file_type=file_type, process=False)
-        return scene_arrays(loaded, what)
+        return scene_arrays(loaded, what, budget)
     except InvalidMeshError:
         raise
     except Exception as exc:  # trimesh and its helpers raise many types for corrupt files
         raise InvalidMeshError(f"could not read the file as {what}: {short(exc)}") from exc
 
 
-def scene_arrays(loaded: object, what: str) -> tuple[np.ndarray, np.ndarray]:
+def scene_arrays(loaded: object, what: str, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(loaded, trimesh.Scene):
+        _check_instances(loaded, what, budget)
         # dump() places a copy of each geometry at every node that refers to it, transforms applied
         geometry = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh) and len(g.faces)]
         if not geometry:
@@ -40,3 +43,17 @@ def short(exc: Exception) -> str:
     """One line of an exception for a user: its first line, at most 200 characters."""
     text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
     return text[:200]
+
+
+def _check_instances(scene: trimesh.Scene, what: str, budget: Budget) -> None:
+    """A scene stores each geometry once and places it at many nodes: count the placed copies before
+    dump() allocates them (a small 3MF or COLLADA file can place one part a million times)."""
+    vertices = faces = 0
+    for node in scene.graph.nodes_geometry:
+        geometry = scene.geometry.get(scene.graph[node][1])
+        if isinstance(geometry, trimesh.Trimesh):
+            vertices += len(geometry.vertices)
+            faces += len(geometry.faces)
+    where = f"the {what} scene (each part counted once per placement)"
+    budget.vertices(vertices, where)
+    budget.faces(faces, where)
