@@ -7,15 +7,24 @@ from __future__ import annotations
 
 import hashlib
 import os
+import socket
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 
+def writer_tag() -> str:
+    """`<pid>@<host>`: who writes a temp file, so the start-up sweep can tell a dead writer's debris
+    (remove now) from a live writer's file in another process or container (leave it)."""
+    return f"{os.getpid()}@{socket.gethostname().replace('.', '_').replace('/', '_')}"
+
+
 def atomic_write(path: Path, data: bytes | Callable[[Path], None]) -> Path:
-    """Write bytes (or let `data(tmp_path)` write) to a temp file beside `path`, fsync, rename."""
+    """Write bytes (or let `data(tmp_path)` write) to a temp file beside `path`, fsync, rename.
+
+    The temp file is `.<name>.<pid>@<host>.<random>.tmp` (see writer_tag and services/sweep.py)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.{writer_tag()}.", suffix=".tmp", dir=path.parent)
     tmp = Path(tmp_name)
     try:
         if callable(data):
@@ -72,7 +81,7 @@ class BlobStore:
         None if there was none. Called inside the delete's transaction; unlink it after the commit,
         or put it back with os.replace if the transaction fails."""
         path = self.mesh_path(sha256, file_type)
-        trash = path.with_name(f".{path.name}.deleted-{os.getpid()}-{id(path):x}.tmp")
+        trash = path.with_name(f".{path.name}.{writer_tag()}.deleted.tmp")  # one delete at a time: the lock
         try:
             os.replace(path, trash)
         except FileNotFoundError:

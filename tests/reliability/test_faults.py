@@ -24,6 +24,7 @@ from app.services.context import open_context
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
 from app.storage import vocabularies as vocab_repo
+from app.storage.blobs import writer_tag
 from app.worker.runner import Worker
 from tests.conftest import make_settings, wait_for
 from tests.reliability.helpers import (
@@ -67,6 +68,7 @@ def consistent(data_dir: Path) -> dict:
     assert index.dim == vocab.dimension(ctx.settings.encode.params())  # words (+ Shape-DNA when fused)
     assert sorted(index.ids().tolist()) == ready
     leftovers = [str(p) for p in data_dir.rglob(".*.tmp")]
+    assert leftovers == [], f"temp files left behind: {leftovers}"  # a killed writer's are swept at start
     return {
         "models": len(models),
         "vocabulary": active.id,
@@ -285,11 +287,24 @@ def test_old_temp_debris_is_swept_at_start_and_fresh_temp_files_are_left(data_di
     long_ago = time.time() - 2 * 3600
     for p in (old_file, old_dir):
         os.utime(p, (long_ago, long_ago))
+    # tagged by atomic_write with <pid>@<host>: a dead writer's file goes at once, a live one's stays
+    host = writer_tag().split("@", 1)[1]
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    by_dead = data_dir / "descriptions" / f".15.npz.{dead.pid}@{host}.a1b2c3.tmp"
+    by_live = data_dir / "descriptions" / f".16.npz.{os.getpid()}@{host}.d4e5f6.tmp"
+    by_other_host = data_dir / "meshes" / f".ab.obj.{dead.pid}@another-container.g7h8i9.tmp"
+    for p in (by_dead, by_live, by_other_host):
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_bytes(b"half a file")
     kept = snapshot(data_dir).files
     with TestClient(create_app(make_settings(data_dir))) as client:
         assert client.get("/healthz").status_code == 200
     assert not old_file.exists() and not old_dir.exists() and fresh.exists()
+    assert not by_dead.exists() and by_live.exists() and by_other_host.exists()
     assert all((data_dir / rel).exists() for rel in kept if ".tmp" not in rel and ".7." not in rel)
+    for p in (fresh, by_live, by_other_host):  # not debris of this test's server: leave none behind
+        p.unlink()
 
 
 def test_worker_on_an_unwritable_data_dir_exits_with_a_clear_error(tmp_path):
