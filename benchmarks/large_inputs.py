@@ -8,8 +8,8 @@ loaded and described in a fresh one-thread child each; seconds per stage and the
 The meshes are generated in a temporary folder (binary PLY, float32 coordinates, as exporters write
 them) and deleted afterwards; nothing is committed. Each child reads the file's bytes and runs the
 upload path (`mesh_policy.load_upload`, then `pipeline.describe` with the default DescribeParams).
-`resample` is describe's decimation stage. Peak RSS is the child's own (ru_maxrss), interpreter and
-imports included (`base_mb`: the same child's RSS before it reads the file). A 50 MiB upload limit
+`resample` is describe's decimation stage. Peak RSS is the child's own (VmHWM), interpreter and
+imports included (`base_mb`: the same child's peak before it reads the file). A 50 MiB upload limit
 (`max_upload_bytes`) is not applied here: the file sizes are printed next to it.
 """
 
@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import REPO_ROOT, peak_rss_mb, table, thread_env, write_json
-from benchmarks.realworld import CORPUS, use_legacy_simplify
+from benchmarks.common import REPO_ROOT, table, thread_env, write_json
+from benchmarks.realworld import CORPUS, own_peak_mb, use_legacy_simplify
 
 # label -> (corpus file, midpoint subdivisions): sizes land near the label (each step ~4x vertices)
 SIZES: dict[str, tuple[str, int]] = {
@@ -61,13 +61,13 @@ def measure(path: str, baseline: bool) -> dict:
 
     if baseline:
         use_legacy_simplify()
-    base = peak_rss_mb()
+    base = own_peak_mb()
     t0 = time.perf_counter()
     data = Path(path).read_bytes()
     mesh = load_upload(data, Path(path).name, Settings.model_fields["max_vertices"].default)
     del data
     t1 = time.perf_counter()
-    load_rss = peak_rss_mb()
+    load_rss = own_peak_mb()
     desc = describe(mesh, DescribeParams())
     t2 = time.perf_counter()
     return {
@@ -80,7 +80,7 @@ def measure(path: str, baseline: bool) -> dict:
         "total_s": t2 - t0,
         "base_mb": base,
         "load_peak_mb": load_rss,
-        "peak_mb": peak_rss_mb(),
+        "peak_mb": own_peak_mb(),
     }
 
 

@@ -39,6 +39,18 @@ OUTCOMES = ("described", "refused", "error", "crash", "timeout")
 TOLERANCE = 1.5  # the canonical-resolution band of resolution.to_resolution
 
 
+def own_peak_mb() -> float:
+    """This process's peak RSS in MiB since its exec (VmHWM): ru_maxrss would carry over the parent's
+    peak at fork, which is large when the parent has just generated a 2M-vertex mesh."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return peak_rss_mb()
+
+
 def legacy_simplify(mesh, target_vertices: int, tolerance: float = 1.5, max_passes: int = 3):
     """resolution.simplify before issue 10 (agg=3 only, at the mesh's own scale): the baseline."""
     import fast_simplification
@@ -108,7 +120,7 @@ def describe_upload(entry: str, baseline: bool = False) -> dict:
         out.update(outcome="refused", message=str(exc))
     except Exception as exc:  # a bug, not a refusal: reported as such
         out.update(outcome="error", message=f"{type(exc).__name__}: {exc}"[:300])
-    out["peak_rss_mb"] = peak_rss_mb()
+    out["peak_rss_mb"] = own_peak_mb()
     return out
 
 

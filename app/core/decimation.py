@@ -47,8 +47,11 @@ def cluster(mesh: Mesh, target_vertices: int, rounds: int = 6, split_sides: bool
     """
     v = mesh.vertices
     lo = v.min(axis=0)
-    normals = _vertex_normals(mesh) if split_sides else None
-    h = float(np.sqrt(mesh.area() / max(target_vertices, 1)))
+    fn = face_normals(mesh)  # (f, 3), |fn| = 2 area
+    normals = _vertex_normals(mesh, fn) if split_sides else None
+    area = 0.5 * float(np.sqrt(np.einsum("ij,ij->i", fn, fn)).sum())
+    del fn
+    h = float(np.sqrt(area / max(target_vertices, 1)))
     labels, count = _clusters(v, lo, h, normals)
     for _ in range(rounds):
         if 0.9 * target_vertices <= count <= 1.05 * target_vertices:
@@ -63,10 +66,20 @@ def cluster(mesh: Mesh, target_vertices: int, rounds: int = 6, split_sides: bool
     return Mesh(centres, faces[keep])
 
 
-def _vertex_normals(mesh: Mesh) -> np.ndarray:
-    """(n, 3) area-weighted vertex normals (not normalised)."""
-    tri = mesh.vertices[mesh.faces]  # (f, 3, 3)
-    fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # (f, 3), |fn| = 2 area
+def face_normals(mesh: Mesh, chunk: int = 1 << 18) -> np.ndarray:
+    """(f, 3) float64 face normals of length twice the face area, computed by chunks of faces so that
+    no (f, 3, 3) temporary exists (277 MB at the 2M-vertex limit)."""
+    v, f = mesh.vertices, mesh.faces
+    out = np.empty((len(f), 3))
+    for s in range(0, len(f), chunk):
+        c = f[s : s + chunk]
+        a = v[c[:, 0]]
+        out[s : s + chunk] = np.cross(v[c[:, 1]] - a, v[c[:, 2]] - a)
+    return out
+
+
+def _vertex_normals(mesh: Mesh, fn: np.ndarray) -> np.ndarray:
+    """(n, 3) area-weighted vertex normals (not normalised) from face normals fn (f, 3)."""
     corners = mesh.faces.ravel()
     return np.stack(
         [np.bincount(corners, weights=np.repeat(fn[:, j], 3), minlength=mesh.n_vertices) for j in range(3)],

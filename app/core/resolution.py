@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from app.core.decimation import cluster, quadric
+from app.core.decimation import cluster, face_normals, quadric
 from app.core.mesh import InvalidMeshError, Mesh, clean
 
 
@@ -131,7 +131,8 @@ def _collapse(mesh: Mesh, target_vertices: int) -> Mesh:
 def _unit_area(mesh: Mesh) -> tuple[Mesh, np.ndarray, float]:
     """(copy centred at the bounding-box centre with unit area, centre (3,), sqrt(area))."""
     centre = 0.5 * (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0))
-    size = float(np.sqrt(mesh.area()))
+    fn = face_normals(mesh)  # chunked: Mesh.area() makes an (f, 3, 3) copy
+    size = float(np.sqrt(0.5 * np.sqrt(np.einsum("ij,ij->i", fn, fn)).sum()))
     return Mesh((mesh.vertices - centre) / size, mesh.faces), centre, size
 
 
