@@ -424,3 +424,43 @@ def test_placements_of_one_part_count_against_the_limit_before_they_are_copied(f
     assert n_components(load_mesh(data, fmt, max_vertices=2100)) == 50
     with pytest.raises(InvalidMeshError, match=f"{where} .* declares 2100 vertices"):
         load_mesh(data, fmt, max_vertices=300)
+
+
+def _valid_files() -> dict[str, bytes]:
+    import DracoPy
+
+    sphere = trimesh.creation.icosphere(subdivisions=1)
+    files = {fmt: sphere.export(file_type=fmt) for fmt in ("obj", "off", "ply", "stl", "glb", "3mf")}
+    files["gltf"] = sphere.export(file_type="gltf", embed_buffers=True)["model.gltf"]
+    files["drc"] = DracoPy.encode(
+        np.asarray(sphere.vertices, np.float32), np.asarray(sphere.faces, np.uint32)
+    )
+    files["glb draco"] = trimesh.exchange.gltf.export_glb(trimesh.Scene(sphere), extension_draco=True)
+    files["ply ascii"] = sphere.export(file_type="ply", encoding="ascii")
+    files["stl ascii"] = trimesh.exchange.stl.export_stl_ascii(sphere)
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("m.gltf", files["gltf"])
+    files["zip"] = buf.getvalue()
+    return {k: v if isinstance(v, bytes) else v.encode() for k, v in files.items()}
+
+
+@pytest.mark.parametrize("kind", sorted(_valid_files()))
+def test_damaged_files_are_refused_in_words(kind):
+    """Truncations and random byte flips of a valid file: each either loads or raises InvalidMeshError
+    with a readable sentence; never another exception, never a library's internals."""
+    data = _valid_files()[kind]
+    rng = np.random.default_rng(sum(map(ord, kind)))
+    damaged = [data[: int(len(data) * k)] for k in np.linspace(0.05, 0.95, 10)]
+    for _ in range(30):
+        flipped = np.frombuffer(data, np.uint8).copy()
+        flipped[rng.integers(0, len(data), size=4)] = rng.integers(0, 256, size=4)
+        damaged.append(flipped.tobytes())
+    unreadable = []
+    for blob in damaged:
+        try:
+            load_mesh(blob, kind.split()[0], max_vertices=10_000)
+        except InvalidMeshError as exc:
+            if not readable(str(exc)) or len(str(exc)) > 300:
+                unreadable.append(str(exc))
+    assert not unreadable, unreadable

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import zipfile
+import zlib
 
 from app.core.meshdata import Budget, InvalidMeshError
 
@@ -32,7 +33,18 @@ def open_zip(data: bytes, budget: Budget, what: str) -> zipfile.ZipFile:
 def read_member(archive: zipfile.ZipFile, name: str, what: str) -> bytes:
     try:
         return archive.read(name)
-    except (zipfile.BadZipFile, ValueError, OSError, NotImplementedError) as exc:
+    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, NotImplementedError, EOFError) as exc:
         raise InvalidMeshError(
             f"could not unpack '{name[:80]}' from the {what} archive: it is corrupt"
         ) from exc
+
+
+def check_members(archive: zipfile.ZipFile, what: str) -> None:
+    """Unpack every member once (within the budget open_zip checked) so that a damaged archive is named
+    as such, not by zlib's words."""
+    try:
+        bad = archive.testzip()
+    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, NotImplementedError, EOFError):
+        bad = "?"
+    if bad is not None:
+        raise InvalidMeshError(f"the {what} archive is corrupt: a file inside it does not unpack")

@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.core.formats.containers import open_zip
+from app.core.formats.containers import check_members, open_zip
 from app.core.formats.scene import load_with_trimesh, short
 from app.core.meshdata import Budget, InvalidMeshError
 
 
 def read_3mf(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
     """3MF: a zip of XML; every build item with its transform (trimesh, which needs lxml and networkx)."""
-    open_zip(data, budget, "3MF").close()  # refuse a zip bomb before trimesh unpacks it
+    with open_zip(data, budget, "3MF") as archive:  # refuse a zip bomb before trimesh unpacks it
+        check_members(archive, "3MF")
     return load_with_trimesh(data, "3mf", "3MF", budget)
 
 

@@ -84,7 +84,8 @@ def _header(data: bytes) -> tuple[str, list[_Element], int]:
             elif words[0] == "property":
                 elements[-1].properties.append(_Property(words[2], _TYPES[words[1]]))
         except (IndexError, KeyError, ValueError):
-            raise InvalidMeshError(f"could not read the file as PLY: bad header line {raw[:60]!r}") from None
+            line = raw[:60].decode("ascii", "replace")
+            raise InvalidMeshError(f"could not read the file as PLY: bad header line '{line}'") from None
     if encoding not in ("ascii", "binary_little_endian", "binary_big_endian"):
         raise InvalidMeshError(f"could not read the file as PLY: unknown format {encoding[:30]!r}")
     return encoding, elements, body

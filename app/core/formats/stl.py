@@ -24,7 +24,9 @@ def read_stl(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
         if 84 + 50 * count == len(data):
             budget.faces(count, "the STL header")
             corners = np.frombuffer(data, _RECORD, count, 84)["corners"].reshape(-1, 3)
-            return corners.astype(np.float64), np.arange(3 * count, dtype=np.int64).reshape(-1, 3)
+            with np.errstate(invalid="ignore"):  # a NaN pattern casts with a warning; validate names it
+                vertices = corners.astype(np.float64)
+            return vertices, np.arange(3 * count, dtype=np.int64).reshape(-1, 3)
         if not _looks_ascii(data):
             raise InvalidMeshError(
                 f"the STL header declares {count} triangles ({84 + 50 * count} bytes), but the file holds"
