@@ -92,10 +92,11 @@ def clean(mesh: Mesh, min_component_area_fraction: float = DEBRIS_FRACTION) -> M
     keep = comp_area >= min_component_area_fraction * comp_area.max()
     comp_faces = np.bincount(labels)
     if comp_faces[keep].max() < MIN_FACES:
+        largest = int(comp_faces.max())
+        size = "a single face each" if largest == 1 else f"at most {largest} faces each"
         raise InvalidMeshError(
             f"the mesh is a triangle soup: its {len(faces)} faces form {comp_area.size} separate pieces"
-            f" of at most {int(comp_faces.max())} faces, with no surface joining them;"
-            " export it as a connected (welded) surface"
+            f" ({size}), with no surface joining them; export it as a connected (welded) surface"
         )
     if not keep.all():
         faces = faces[keep[labels]]
