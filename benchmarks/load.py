@@ -5,20 +5,29 @@
 
 Every upload is a new mesh (a perturbed copy of a corpus mesh), so it is stored and ingested: the
 workers compete with the query pool for the same cores. Prints requests, errors and p50/p99 latency per
-kind and writes results/load.json. An error is any transport failure or non-2xx answer.
+kind and writes results/load.json. An error is any transport failure or non-2xx answer, except a 503
+with Retry-After (admission control shedding load: counted as `shed`, and the client waits as told).
+
+It also prints the peak RSS (VmHWM, sampled every 0.25 s so restarted processes count too) of the API
+process and of each worker / query-pool process, first under the hostile phase (every case of the
+bad-input corpus to /models, /search and /web/preview.png, thumbnails at every size), then under load.
+Goal (issue 12): the API process under 1 GB whatever the input, each child under its RLIMIT_AS cap.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import os
 import random
 import signal
 import socket
+import sqlite3
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -78,6 +87,7 @@ async def drive(
     """Run the load; returns {kind: {requests, errors, p50_s, p99_s}} plus error samples and totals."""
     lat: dict[str, list[float]] = {"search": [], "upload": []}
     errors: dict[str, int] = {"search": 0, "upload": 0}
+    shed: dict[str, int] = {"search": 0, "upload": 0}
     samples: list[str] = []
     pick = random.Random(seed)
     deadline = time.monotonic() + seconds
@@ -96,7 +106,12 @@ async def drive(
                     ok = 200 <= r.status_code < 300
                     detail = f"{r.status_code} {r.text[:120]}"
                 except httpx.HTTPError as exc:
-                    ok, detail = False, f"{type(exc).__name__}: {exc}"
+                    ok, detail, r = False, f"{type(exc).__name__}: {exc}", None
+                if r is not None and r.status_code == 503 and "retry-after" in r.headers:
+                    shed[kind] += 1  # admission control: not an error; back off as the server asks
+                    # + 0.5 s: past uvicorn's 5 s keep-alive, so a connection it is closing is never reused
+                    await asyncio.sleep(float(r.headers["retry-after"]) + 0.5)
+                    continue
                 lat[kind].append(time.perf_counter() - t)
                 if not ok:
                     errors[kind] += 1
@@ -112,6 +127,7 @@ async def drive(
         out[kind] = {
             "requests": len(values),
             "errors": errors[kind],
+            "shed": shed[kind],
             "p50_s": float(np.percentile(v, 50)),
             "p99_s": float(np.percentile(v, 99)),
             "max_s": float(v.max()),
@@ -126,11 +142,133 @@ def report(result: dict) -> str:
     rows = [{"kind": k, **result[k]} for k in ("search", "upload")]
     text = table(
         rows,
-        ["kind", "requests", "errors", "p50_s", "p99_s", "max_s"],
+        ["kind", "requests", "errors", "shed", "p50_s", "p99_s", "max_s"],
         title=f"load: {result['clients']} clients for {result['seconds']:g} s "
         f"({result['throughput_rps']:.1f} requests/s, {result['errors']} errors)",
     )
     return text + "".join(f"  error: {s}\n" for s in result["error_samples"])
+
+
+class PeakRss:
+    """Samples VmHWM (peak resident set, kB) of a server and its descendants in a background thread;
+    the peak per process survives the process (a restarted pool process is a new pid)."""
+
+    def __init__(self, pid: int, data_dir: Path | None, interval_s: float = 0.25) -> None:
+        self.pid, self.data_dir, self.interval_s = pid, data_dir, interval_s
+        self.peak_kb: dict[int, int] = {}
+        self.role: dict[int, str] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> PeakRss:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.sample()
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.interval_s):
+            self.sample()
+
+    def sample(self) -> None:
+        workers = self._worker_pids()
+        for pid in [self.pid, *_descendants(self.pid)]:
+            try:
+                status = Path(f"/proc/{pid}/status").read_text()
+                cmdline = Path(f"/proc/{pid}/cmdline").read_bytes()
+            except OSError:
+                continue
+            hwm = next((int(line.split()[1]) for line in status.splitlines() if line.startswith("VmHWM")), 0)
+            self.peak_kb[pid] = max(self.peak_kb.get(pid, 0), hwm)
+            if pid == self.pid:
+                self.role[pid] = "api"
+            elif b"resource_tracker" in cmdline:
+                self.role[pid] = "resource tracker"
+            elif pid in workers:
+                self.role[pid] = "worker"
+            else:
+                self.role.setdefault(pid, "query pool")
+
+    def _worker_pids(self) -> set[int]:
+        if self.data_dir is None:
+            return set()
+        try:
+            conn = sqlite3.connect(f"file:{self.data_dir / 'shapebag.db'}?mode=ro", uri=True, timeout=1)
+            try:
+                return {int(r[0]) for r in conn.execute("SELECT pid FROM workers")}
+            finally:
+                conn.close()
+        except sqlite3.Error:
+            return set()
+
+    def summary(self) -> dict:
+        """{role: {"processes": n, "peak_mb": max over them}}."""
+        out: dict[str, dict] = {}
+        for pid, kb in self.peak_kb.items():
+            row = out.setdefault(self.role.get(pid, "?"), {"processes": 0, "peak_mb": 0.0})
+            row["processes"] += 1
+            row["peak_mb"] = max(row["peak_mb"], round(kb / 1024, 1))
+        return out
+
+
+def _descendants(pid: int) -> list[int]:
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            children.setdefault(int(stat[stat.rfind(")") + 2 :].split()[1]), []).append(int(entry.name))
+    out, todo = [], [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            out.append(child)
+            todo.append(child)
+    return out
+
+
+def hostile(base: str) -> dict:
+    """Every bad-input corpus case to /models, /search and /web/preview.png, bad metadata, then each
+    thumbnail size of a few models: returns {status code: count} (5xx would be a bug)."""
+    from tests.reliability.corpus import bad_metadata, build
+    from tests.reliability.helpers import MULTIPART_HEADERS, multipart  # exact bytes, as a client could send
+
+    codes: dict[str, int] = {}
+
+    def count(method: str, url: str, **kwargs) -> None:
+        try:
+            key = str(http.request(method, url, **kwargs).status_code)
+        except (httpx.HTTPError, ValueError, TypeError):  # a case this client cannot even send
+            key = "not sent"
+        codes[key] = codes.get(key, 0) + 1
+
+    with httpx.Client(base_url=base, timeout=300) as http:
+        for case in build():
+            for route in ("/models", "/search", "/web/preview.png"):
+                body = multipart(case.filename, case.content, case.fields)
+                count("POST", route, content=body, headers=MULTIPART_HEADERS)
+        good = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n"
+        for _, raw in bad_metadata():
+            count(
+                "POST",
+                "/models",
+                content=multipart("m.obj", good, {"metadata": raw}),
+                headers=MULTIPART_HEADERS,
+            )
+        ids = [m["id"] for m in http.get("/models", params={"limit": 4}).json()["data"]]
+        for model_id in ids:
+            for size in (64, 128, 256, 512, 1024):
+                count("GET", f"/models/{model_id}/thumbnail.png", params={"size": size})
+    return codes
+
+
+def rss_report(title: str, summary: dict) -> str:
+    rows = [{"process": role, **row} for role, row in sorted(summary.items())]
+    return table(rows, ["process", "processes", "peak_mb"], title=title)
 
 
 def corpus_files(n: int = 16) -> list[Path]:
@@ -170,7 +308,7 @@ def seed_data_dir(data_dir: Path, files: list[Path]) -> None:
     worker.run_forever(exit_when_idle=True)
 
 
-def serve(data_dir: Path, workers: int) -> tuple[subprocess.Popen, str]:
+def serve(data_dir: Path, workers: int, extra: dict[str, str] | None = None) -> tuple[subprocess.Popen, str]:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -180,6 +318,7 @@ def serve(data_dir: Path, workers: int) -> tuple[subprocess.Popen, str]:
         SHAPEBAG_DATA_DIR=str(data_dir),
         SHAPEBAG_ADMIN_TOKEN="load-test",
         SHAPEBAG_WORKERS=str(workers),
+        **(extra or {}),
     )
     proc = subprocess.Popen(
         [sys.executable, "-m", "app.cli", "serve", "--port", str(port)],
@@ -210,22 +349,40 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--upload-share", type=float, default=0.2, help="fraction of requests that upload")
     ap.add_argument("--workers", type=int, default=1, help="embedded workers of the started server")
     ap.add_argument("--url", default=None, help="drive a running server instead of starting one")
+    ap.add_argument("--pid", type=int, default=None, help="with --url: the server's pid, for peak RSS")
+    ap.add_argument("--no-hostile", action="store_true", help="skip the bad-input phase")
     args = ap.parse_args(argv)
     files = corpus_files()
     meshes = Meshes(files)
     proc = None
+    rss: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="shapebag-load-") as tmp:
-        base = args.url
+        base, pid, data_dir = args.url, args.pid, None
         if base is None:
-            seed_data_dir(Path(tmp) / "data", files)
-            proc, base = serve(Path(tmp) / "data", args.workers)
+            data_dir = Path(tmp) / "data"
+            seed_data_dir(data_dir, files)
+            proc, base = serve(data_dir, args.workers)
+            pid = proc.pid
         try:
-            result = asyncio.run(drive(base, meshes, args.clients, args.seconds, args.upload_share))
+            if not args.no_hostile:
+                with PeakRss(pid, data_dir) if pid else contextlib.nullcontext() as peaks:
+                    codes = hostile(base)
+                print(f"hostile phase: answers by status {dict(sorted(codes.items()))}")
+                if peaks is not None:
+                    rss["hostile"] = peaks.summary()
+                    print(rss_report("peak RSS under the bad-input corpus", rss["hostile"]))
+            with PeakRss(pid, data_dir) if pid else contextlib.nullcontext() as peaks:
+                result = asyncio.run(drive(base, meshes, args.clients, args.seconds, args.upload_share))
+            if peaks is not None:
+                rss["load"] = peaks.summary()
         finally:
             if proc is not None:
                 os.killpg(proc.pid, signal.SIGTERM)
                 proc.wait(60)
     print(report(result))
+    if "load" in rss:
+        print(rss_report("peak RSS under load (the whole run, per process kind)", rss["load"]))
+    result["peak_rss"] = rss
     write_json("load", result)
     return 0 if result["errors"] == 0 else 1
 
