@@ -82,7 +82,6 @@ class Vocabulary:
     ) -> Vocabulary:
         """This vocabulary plus fusion scales fit on `descriptions` (its training shapes), their BoF
         encoded with `params`: the scales belong to the vocabulary, so stored vectors stay comparable."""
-        params = replace(params or EncodeParams(), fusion=False)
         if len(descriptions) < 2:
             raise ValueError("fusion scales need at least 2 training shapes")
         # c: as many eigenvalues as every training shape has (SHAPE_DNA_COUNT unless k is tiny)
@@ -90,7 +89,7 @@ class Vocabulary:
         count = min(SHAPE_DNA_COUNT, available)
         if count < 1:
             raise ValueError("a training shape has no non-zero eigenvalue: no Shape-DNA to fuse")
-        bofs = np.stack([self.encode(d, params) for d in descriptions])  # (N, v)
+        bofs = np.stack([self.bof(d, params) for d in descriptions])  # (N, v)
         dnas = np.stack([dna_vector(d, count) for d in descriptions])  # (N, c)
         scales = fit_scales(bofs, dnas, weight)
         return replace(self, metadata=dict(self.metadata, fusion=scales.to_dict()))
