@@ -3,6 +3,7 @@ PY      ?= python3
 VENV    ?= .venv
 BIN     := $(VENV)/bin
 DATA    ?= var/data
+DEMO    ?= var/demo
 PORT    ?= 8000
 DATASET ?= ../shared/datasets/shrec11-simplified
 DOCKER_UP ?= ../shared/containers/docker-up.sh
@@ -11,12 +12,15 @@ VOCAB_CLASSES   ?= 8
 VOCAB_PER_CLASS ?= 12
 
 .DEFAULT_GOAL := help
-.PHONY: help install run serve test test-fast lint format evaluate vocabulary bench docker-lint docker-test clean
+.PHONY: help install run serve test test-fast chromium lint format evaluate vocabulary bench docker-lint docker-test clean clean-demo clean-data
 
 help:  ## list the commands
-	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-12s %s\n", $$1, $$2}'
+	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) \
+	  | sed 's|\$$(PORT)|$(PORT)|g; s|\$$(DATA)|$(DATA)|g; s|\$$(DEMO)|$(DEMO)|g' \
+	  | awk -F':.*## ' '{printf "  make %-12s %s\n", $$1, $$2}'
 
 $(BIN)/shapebag: pyproject.toml
+	@echo "installing shapebag and its dependencies into $(VENV) (the first time: a minute or two) ..."
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	$(BIN)/pip install -q -e '.[dev]'
@@ -24,14 +28,17 @@ $(BIN)/shapebag: pyproject.toml
 
 install: $(BIN)/shapebag  ## create .venv and install shapebag with its dev tools
 
-run: install  ## quick start: generate + ingest a synthetic corpus, then serve on 127.0.0.1:$(PORT)
-	$(BIN)/shapebag demo --data-dir $(DATA) --port $(PORT)
+run: install  ## quick start: the synthetic demo corpus in $(DEMO), served on 127.0.0.1:$(PORT) (dev mode)
+	$(BIN)/shapebag demo --data-dir $(DEMO) --port $(PORT)
 
-serve: install  ## serve an existing data directory
-	$(BIN)/shapebag serve --data-dir $(DATA) --port $(PORT)
+serve: install  ## serve your own data directory $(DATA) (empty at first; dev mode unless SHAPEBAG_ADMIN_TOKEN is set)
+	$(BIN)/shapebag serve --data-dir $(DATA) --port $(PORT) $$([ -z "$$SHAPEBAG_ADMIN_TOKEN" ] && echo --dev)
 
-test: install  ## run the whole test suite (what CI runs)
+test: install chromium  ## the whole suite, ~10 min on 2 cores; starts (then stops) a Docker engine
 	$(BIN)/pytest -q
+
+chromium:  ## Debian's chromium for the browser tests (installed as root; otherwise says they will skip)
+	@bash .ci/chromium.sh
 
 test-fast: install  ## the suite without slow (dataset-wide, multi-process) tests
 	$(BIN)/pytest -q -m "not slow and not docker"
@@ -67,5 +74,13 @@ docker-lint: install  ## hadolint the Dockerfile; `docker compose config -q` whe
 docker-test: install  ## the compose stack on a real engine: build, ingest, search, restart, scale
 	$(BIN)/pytest -q -m docker tests/deploy
 
-clean:  ## remove caches (keeps .venv and data)
+clean:  ## remove caches (keeps .venv, $(DEMO) and $(DATA))
 	rm -rf .pytest_cache .ruff_cache .mypy_cache results .cache
+
+clean-demo:  ## delete the demo data dir $(DEMO) (`make run` regenerates it)
+	rm -rf $(DEMO)
+
+clean-data:  ## delete YOUR data dir $(DATA): models, index, vocabularies (asks first; CONFIRM=1 skips)
+	@if [ -d $(DATA) ] && [ "$(CONFIRM)" != 1 ]; then \
+	  printf "delete %s and everything in it? [y/N] " "$(DATA)"; read answer; [ "$$answer" = y ] || exit 1; fi
+	rm -rf $(DATA)

@@ -32,9 +32,8 @@ def run(args: argparse.Namespace) -> int:
 
 def ingest_folder(settings, directory: Path, processes: int, wait: bool = True) -> dict:
     """Queue the folder, run local workers until its jobs finish, fit a first vocabulary if none."""
-    from tqdm import tqdm
-
     from app.datasets.folder import DatasetError, read_labelled_folder
+    from app.progress import progress
     from app.services import bulk, vocabularies
     from app.services.context import open_context
     from app.worker.processes import WorkerPool
@@ -45,7 +44,7 @@ def ingest_folder(settings, directory: Path, processes: int, wait: bool = True) 
         total = len(read_labelled_folder(directory))
     except DatasetError as exc:
         raise CommandError(str(exc)) from exc
-    with tqdm(total=total, desc="queue", unit="mesh") as bar:
+    with progress(total=total, desc="queue", unit="mesh") as bar:
         report = bulk.submit_folder(ctx, directory, on_file=lambda: bar.update(1))
     for path, reason in report.rejected:
         print(f"  rejected {path}: {reason}")
@@ -62,16 +61,16 @@ def ingest_folder(settings, directory: Path, processes: int, wait: bool = True) 
     pool = WorkerPool(quiet, max(1, processes), prefix="ingest")
     pool.start()
     try:
-        with tqdm(total=len(report.job_ids), desc="describe", unit="mesh") as bar:
+        with progress(total=len(report.job_ids), desc="describe", unit="mesh") as bar:
 
-            def progress(done: int, failed: int) -> None:
+            def on_progress(done: int, failed: int) -> None:
                 if bar.n == done + failed:
                     return
                 bar.n = done + failed
                 bar.set_postfix(failed=failed)
                 bar.refresh()
 
-            _, summary["failed"] = bulk.wait_for_jobs(ctx, report.job_ids, progress)
+            _, summary["failed"] = bulk.wait_for_jobs(ctx, report.job_ids, on_progress)
         vocab_job = bulk.ensure_vocabulary_job(ctx)
         if vocab_job is not None:
             print("no active vocabulary: fitting one on the ingested models ...")

@@ -44,7 +44,7 @@ def _local(args: argparse.Namespace) -> tuple[list[dict], dict]:
     from app.services.live_index import LiveIndex
     from app.services.mesh_policy import load_upload
 
-    ctx = open_context(settings_from(args))
+    ctx = open_context(settings_from(args, must_exist=True))  # never an empty database elsewhere
     t = time.perf_counter()
     try:
         mesh = load_upload(args.file, None, ctx.settings.max_vertices)

@@ -31,6 +31,7 @@ def run(args: argparse.Namespace) -> int:
 def serve(settings) -> int:
     import uvicorn
 
+    from app.config import DEFAULT_ADMIN_TOKEN
     from app.main import create_app
 
     setup_logging(verbose=True)
@@ -39,5 +40,8 @@ def serve(settings) -> int:
     except ValueError as exc:  # e.g. the default admin token outside dev mode
         raise CommandError(str(exc)) from exc
     print(f"shapebag: serving {settings.data_dir} on http://{settings.host}:{settings.port}/ (docs at /docs)")
+    if settings.dev_mode and settings.admin_token == DEFAULT_ADMIN_TOKEN:  # the README's admin calls need it
+        token = DEFAULT_ADMIN_TOKEN
+        print(f"shapebag: dev mode, admin token {token!r}: curl -H 'X-Admin-Token: {token}' ...")
     uvicorn.run(app, host=settings.host, port=settings.port, log_level="info")
     return 0

@@ -50,11 +50,10 @@ def run_fit(args: argparse.Namespace) -> int:
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
 
-    from tqdm import tqdm
-
     from app.core.fusion import DEFAULT_WEIGHT
     from app.core.vocabulary import Vocabulary
     from app.datasets.folder import DatasetError, read_labelled_folder
+    from app.progress import progress
     from app.services.query_pool import describe_bytes
     from app.worker.processes import pin_threads
 
@@ -73,7 +72,7 @@ def run_fit(args: argparse.Namespace) -> int:
             pool.submit(describe_bytes, i.path.read_bytes(), i.path.suffix, params, settings.max_vertices)
             for i in items
         ]
-        for item, fut in tqdm(
+        for item, fut in progress(
             zip(items, futures, strict=True), total=len(items), desc="describe", unit="mesh"
         ):
             try:
@@ -152,7 +151,7 @@ def run_show(args: argparse.Namespace) -> int:
     from app.services.context import open_context
     from app.storage import vocabularies as vocab_repo
 
-    ctx = open_context(settings_from(args))
+    ctx = open_context(settings_from(args, must_exist=True))
     with ctx.db.read() as conn:
         versions = vocab_repo.all_versions(conn)
     if not versions:

@@ -6,6 +6,7 @@ Python base image, because no registry is reachable); the test skips only when n
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import socket
@@ -20,6 +21,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[2]
 SHARED = REPO.parent / "shared"  # /work/shared beside /work/main; ../shared in CI
 DOCKER_UP = SHARED / "containers" / "docker-up.sh"
+DOCKER_DOWN = SHARED / "containers" / "docker-down.sh"  # stops only the dockerd docker-up.sh started
 DATASET = SHARED / "datasets" / "shrec11-simplified"
 LOCAL_BASE_IMAGE = "localhost/debian-python:bookworm"
 TEST_IMAGE = "shapebag:compose-test"  # removed by the final `down --rmi all`; the build cache stays
@@ -39,29 +41,67 @@ def _engine_works(env: dict[str, str]) -> bool:
         return False
 
 
-@pytest.fixture(scope="session")
-def docker_env() -> dict[str, str]:
-    """Environment (DOCKER_HOST, DOCKER_CONFIG, BASE_IMAGE) of a running engine with compose v2."""
-    env = dict(os.environ)
-    if DOCKER_UP.is_file():
-        # idempotent: a few seconds when the engine already runs, 2-3 minutes cold
-        try:
-            up = _run(["bash", str(DOCKER_UP)], env, 900)
-        except subprocess.TimeoutExpired:
-            pytest.skip(f"no Docker engine: {DOCKER_UP} did not finish in 900 s")
+def _engine_env(up_script: Path, env: dict[str, str]) -> dict[str, str]:
+    """The environment docker-up.sh would export (`--env`: prints them, starts nothing)."""
+    out = dict(env)
+    try:
+        printed = _run(["bash", str(up_script), "--env"], env, 30).stdout
+    except subprocess.TimeoutExpired:
+        return out
+    for line in printed.splitlines():  # "export NAME=value" lines
+        if line.startswith("export ") and "=" in line:
+            name, value = line[len("export ") :].split("=", 1)
+            out[name] = value
+    return out
+
+
+def _daemon_up(env: dict[str, str]) -> bool:
+    if shutil.which("docker", path=env.get("PATH")) is None:
+        return False
+    try:
+        return _run(["docker", "info"], env, 30).returncode == 0
+    except subprocess.TimeoutExpired:
+        return False
+
+
+@contextlib.contextmanager
+def engine(up_script: Path, down_script: Path, env: dict[str, str]) -> Iterator[dict[str, str]]:
+    """A running engine's environment; stops it afterwards only if this call started it.
+
+    `make test` must leave the machine as it found it: an engine that ran before the tests keeps running,
+    one that docker-up.sh started for them is stopped by docker-down.sh (SHAPEBAG_KEEP_DOCKER=1 keeps it).
+    """
+    was_running = _daemon_up(_engine_env(up_script, env))
+    try:
+        up = _run(["bash", str(up_script)], env, 900)  # idempotent: seconds when warm, 2-3 minutes cold
+    except subprocess.TimeoutExpired:
+        pytest.skip(f"no Docker engine: {up_script} did not finish in 900 s")
+    started = not was_running
+    try:
         if up.returncode != 0:
             tail = (up.stdout + up.stderr).strip().splitlines()[-8:]
-            pytest.skip(f"no Docker engine: {DOCKER_UP} failed (exit {up.returncode}): " + " | ".join(tail))
-        for line in up.stdout.splitlines():  # "export NAME=value" lines
-            if line.startswith("export ") and "=" in line:
-                name, value = line[len("export ") :].split("=", 1)
-                env[name] = value
-        env.setdefault("BASE_IMAGE", LOCAL_BASE_IMAGE)
-    elif not _engine_works(env):
-        pytest.skip(f"no Docker engine: {DOCKER_UP} is missing and `docker info` / `docker compose` fail")
-    if not _engine_works(env):
-        pytest.skip("no Docker engine: docker-up.sh ran but `docker info` or `docker compose version` fails")
-    return env
+            pytest.skip(f"no Docker engine: {up_script} failed (exit {up.returncode}): " + " | ".join(tail))
+        out = _engine_env(up_script, env)
+        out.setdefault("BASE_IMAGE", LOCAL_BASE_IMAGE)
+        yield out
+    finally:
+        if started and env.get("SHAPEBAG_KEEP_DOCKER") != "1" and down_script.is_file():
+            _run(["bash", str(down_script)], env, 60)
+
+
+@pytest.fixture(scope="session")
+def docker_env() -> Iterator[dict[str, str]]:
+    """Environment (DOCKER_HOST, DOCKER_CONFIG, BASE_IMAGE) of a running engine with compose v2."""
+    env = dict(os.environ)
+    if not DOCKER_UP.is_file():
+        if not _engine_works(env):
+            pytest.skip(f"no Docker engine: {DOCKER_UP} is missing and `docker info` / `docker compose` fail")
+        yield env
+        return
+    with engine(DOCKER_UP, DOCKER_DOWN, env) as up:
+        if not _engine_works(up):
+            pytest.skip("no Docker engine: docker-up.sh ran; `docker info` or `docker compose version` fails")
+        yield up
 
 
 def free_port() -> int:
