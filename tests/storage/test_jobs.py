@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from types import SimpleNamespace
 
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
@@ -53,19 +54,23 @@ def test_claims_are_exclusive_under_concurrency(tmp_path):
     assert sorted(claimed) == list(range(1, 41))  # each job exactly once
 
 
-def test_expired_lease_is_retried_then_fails_with_reason(tmp_path):
+def test_expired_lease_is_retried_then_fails_with_reason(tmp_path, monkeypatch):
+    # a clock the test moves (not 50 ms leases and sleeps, which a loaded machine outran)
+    clock = {"now": 1_000_000.0}
+    monkeypatch.setattr(jobs_repo, "time", SimpleNamespace(time=lambda: clock["now"]))
     db = _db(tmp_path)
     mid = _model(db)
     with db.write() as conn:
         job_id = jobs_repo.enqueue(conn, "ingest", model_id=mid)
-    first = jobs_repo.claim(db, "crashed", lease_seconds=0.05, max_attempts=2)
+    first = jobs_repo.claim(db, "crashed", lease_seconds=10, max_attempts=2)
     assert first.id == job_id and first.attempts == 1 and first.state == "running"
-    assert jobs_repo.claim(db, "other", lease_seconds=0.05, max_attempts=2) is None  # lease still held
-    time.sleep(0.1)
-    second = jobs_repo.claim(db, "other", lease_seconds=0.05, max_attempts=2)
+    clock["now"] += 9.9
+    assert jobs_repo.claim(db, "other", lease_seconds=10, max_attempts=2) is None  # lease still held
+    clock["now"] += 0.2
+    second = jobs_repo.claim(db, "other", lease_seconds=10, max_attempts=2)
     assert second.id == job_id and second.attempts == 2 and second.worker == "other"
-    time.sleep(0.1)
-    assert jobs_repo.claim(db, "third", lease_seconds=0.05, max_attempts=2) is None
+    clock["now"] += 10.1
+    assert jobs_repo.claim(db, "third", lease_seconds=10, max_attempts=2) is None
     with db.read() as conn:
         job = jobs_repo.get(conn, job_id)
         model = models_repo.get(conn, mid)
@@ -73,15 +78,19 @@ def test_expired_lease_is_retried_then_fails_with_reason(tmp_path):
     assert model.status == "failed" and model.error == job.error
 
 
-def test_extend_lease_only_for_the_owner(tmp_path):
+def test_extend_lease_only_for_the_owner(tmp_path, monkeypatch):
+    clock = {"now": 1_000_000.0}
+    monkeypatch.setattr(jobs_repo, "time", SimpleNamespace(time=lambda: clock["now"]))
     db = _db(tmp_path)
     with db.write() as conn:
         jobs_repo.enqueue(conn, "rebuild_index")
-    job = jobs_repo.claim(db, "a", lease_seconds=0.05, max_attempts=3)
+    job = jobs_repo.claim(db, "a", lease_seconds=10, max_attempts=3)
     assert jobs_repo.extend_lease(db, job.id, "a", lease_seconds=60)
     assert not jobs_repo.extend_lease(db, job.id, "b", lease_seconds=60)
-    time.sleep(0.1)
+    clock["now"] += 30  # past the first lease, inside the extended one
     assert jobs_repo.claim(db, "b", lease_seconds=60, max_attempts=3) is None  # extended: not expired
+    clock["now"] += 31
+    assert jobs_repo.claim(db, "b", lease_seconds=60, max_attempts=3).worker == "b"  # now it has expired
 
 
 def test_queue_depth_and_pending(tmp_path):
