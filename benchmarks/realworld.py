@@ -92,6 +92,25 @@ def upload_of(entry: Path) -> tuple[bytes, str]:
     return buf.getvalue(), f"{entry.name}.zip"
 
 
+def decimation_quality(before, after, samples: int = 20000) -> dict:
+    """Shape kept by the resampling: area ratio, and the symmetric Hausdorff and mean distances
+    between `samples` random surface points of each mesh, as % of the input's bounding-box diagonal.
+    Sampled: distances below ~0.5 % of the diagonal are the sampling's own spacing."""
+    import numpy as np
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    def points(mesh, seed: int):
+        tm = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
+        return trimesh.sample.sample_surface(tm, samples, seed=seed)[0]
+
+    pa, pb = points(before, 0), points(after, 1)
+    d = np.concatenate([cKDTree(pb).query(pa)[0], cKDTree(pa).query(pb)[0]])
+    diag = float(np.linalg.norm(np.ptp(before.vertices, axis=0)))
+    return {"area_ratio": after.area() / before.area(), "hausdorff_pct": 100 * float(d.max()) / diag,
+            "mean_dist_pct": 100 * float(d.mean()) / diag}
+
+
 def describe_upload(entry: str, baseline: bool = False) -> dict:
     """In this (child) process: the upload path on one corpus entry; never raises."""
     from app.config import Settings
@@ -116,6 +135,10 @@ def describe_upload(entry: str, baseline: bool = False) -> dict:
         out["describe_s"] = time.perf_counter() - t1
         out["describe_cpu_s"] = time.process_time() - c1  # what an idle core would take (one thread)
         out.update(outcome="described", vertices_solved=desc.n_vertices, stages=desc.seconds)
+        if mesh.n_vertices > TOLERANCE * params.target_vertices:  # decimated: how much shape it kept
+            from app.core.resolution import to_resolution
+
+            out.update(decimation_quality(mesh, to_resolution(mesh, params.target_vertices)))
     except InvalidMeshError as exc:
         out.update(outcome="refused", message=str(exc))
     except Exception as exc:  # a bug, not a refusal: reported as such
@@ -172,6 +195,7 @@ def summarise(rows: list[dict]) -> dict:
     described = [r for r in rows if r["outcome"] == "described"]
     seconds = [r["describe_s"] for r in described]
     cpu = [r["describe_cpu_s"] for r in described]
+    decimated = [r for r in described if "area_ratio" in r]
     above = [r["file"] for r in described if r["vertices_solved"] > TOLERANCE * r["target"]]
     below = [r["file"] for r in described if r["vertices_solved"] * TOLERANCE < r["target"]]
     return {
@@ -183,12 +207,19 @@ def summarise(rows: list[dict]) -> dict:
         "solved_above_band": above,
         "solved_below_band": below,
         "max_peak_rss_mb": max((r.get("peak_rss_mb", 0.0) for r in rows), default=0.0),
+        "decimated": {
+            "files": len(decimated),
+            "area_ratio_min": min((r["area_ratio"] for r in decimated), default=float("nan")),
+            "area_ratio_max": max((r["area_ratio"] for r in decimated), default=float("nan")),
+            "hausdorff_pct": distribution([r["hausdorff_pct"] for r in decimated]),
+            "mean_dist_pct": distribution([r["mean_dist_pct"] for r in decimated]),
+        },
     }
 
 
 def report(rows: list[dict], summary: dict) -> str:
     cols = ["file", "outcome", "vertices_in", "vertices_solved", "load_s", "describe_s", "describe_cpu_s",
-            "peak_rss_mb"]
+            "peak_rss_mb", "area_ratio", "hausdorff_pct", "mean_dist_pct"]
     text = table(rows, cols, title="realworld: upload path per file (one process, one thread)")
     messages = [r for r in rows if r["outcome"] != "described"]
     if messages:
@@ -206,6 +237,14 @@ def report(rows: list[dict], summary: dict) -> str:
         f"{summary['solved_below_band'] or ''}\n"
         f"largest child peak RSS: {summary['max_peak_rss_mb']:.0f} MiB\n"
     )
+    q = summary["decimated"]
+    if q["files"]:
+        text += (
+            f"decimated files: {q['files']}; area ratio {q['area_ratio_min']:.3f} to "
+            f"{q['area_ratio_max']:.3f}\n"
+            f"  sampled Hausdorff distance, % of the diagonal: {_line(q['hausdorff_pct'])}\n"
+            f"  mean distance, % of the diagonal: {_line(q['mean_dist_pct'])}\n"
+        )
     return text
 
 

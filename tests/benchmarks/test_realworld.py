@@ -56,6 +56,7 @@ def test_realworld_benchmark_describes_refuses_and_zips_folders(tmp_path, capsys
     wingnut = rows["oded__wingnut.obj"]
     assert wingnut["outcome"] == "described"
     assert wingnut["target"] / 1.5 <= wingnut["vertices_solved"] <= 1.5 * wingnut["target"]
+    assert 0.95 < wingnut["area_ratio"] < 1.05 and 0 < wingnut["mean_dist_pct"] < wingnut["hausdorff_pct"]
     assert rows["trimesh__empty.stl"]["outcome"] == "refused" and rows["trimesh__empty.stl"]["message"]
     assert rows["gltf_fox"]["outcome"] in ("described", "refused")  # whatever the loader says of a .zip
     assert sum(doc["summary"]["counts"].values()) == 3
