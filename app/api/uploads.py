@@ -87,7 +87,10 @@ async def read_form(request: Request, max_bytes: int) -> UploadForm:
             parser.write(chunk)
         except MultipartParseError as exc:
             raise InvalidInputError(f"malformed multipart body: {exc}") from exc
-    parser.finalize()
+    try:
+        parser.finalize()
+    except MultipartParseError as exc:
+        raise InvalidInputError(f"malformed multipart body: {exc}") from exc
     for _, content in form.files.values():
         if len(content) > max_bytes:
             raise _too_large(max_bytes)

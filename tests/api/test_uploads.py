@@ -81,3 +81,35 @@ def test_not_multipart_is_a_clear_error():
     }
     with pytest.raises(InvalidInputError, match="multipart/form-data"):
         asyncio.run(read_form(Request(scope), max_bytes=10))
+
+
+MALFORMED = [
+    b"garbage",
+    f"--{BOUNDARY}X".encode(),
+    f"--{BOUNDARY}\r\nContent-Disposition form-data\r\n\r\nx\r\n--{BOUNDARY}--\r\n".encode(),
+    f"--{BOUNDARY}\r\n\x00\x01\r\n\r\n".encode(),
+]
+
+
+@pytest.mark.parametrize("body", MALFORMED)
+def test_a_malformed_multipart_body_is_invalid_input(body):
+    """Not a parser exception (a 500) but InvalidInputError (issue 15 item 1)."""
+    with pytest.raises(InvalidInputError, match="malformed multipart"):
+        asyncio.run(read_form(_request(body)[0], 10_000))
+
+
+def test_every_route_reading_a_form_answers_a_malformed_body_with_422(settings):
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+
+    headers = {"content-type": f"multipart/form-data; boundary={BOUNDARY}"}
+    with TestClient(create_app(settings.model_copy(update={"workers": 0}))) as client:
+        for route in ("/models", "/search", "/web/preview.png"):
+            for body in MALFORMED:
+                r = client.post(route, content=body, headers=headers)
+                assert r.status_code == 422 and "malformed multipart" in r.json()["error"]["message"], (
+                    route,
+                    body,
+                    r.text[:200],
+                )
