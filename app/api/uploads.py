@@ -109,4 +109,3 @@ def multipart_body(file_description: str, **fields: dict) -> dict:
     properties = {"file": {"type": "string", "format": "binary", "description": file_description}, **fields}
     schema = {"type": "object", "required": ["file"], "properties": properties}
     return {"requestBody": {"required": True, "content": {"multipart/form-data": {"schema": schema}}}}
-
