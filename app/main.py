@@ -15,7 +15,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from app.api import errors
 from app.api.deps import Runtime
 from app.api.limits import GuardUploads, RefuseEncodedBodies, check_data_dir
-from app.api.routes import admin, health, jobs, labels, models, search, web
+from app.api.routes import admin, docs, health, jobs, labels, models, search, web
 from app.config import Settings
 from app.services import vocabularies
 from app.services.context import ServiceContext, open_context
@@ -75,6 +75,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version="0.1.0",
         description="Non-rigid 3D shape retrieval: Heat Kernel Signature + Bag of Features, L1 index.",
         lifespan=lifespan,
+        docs_url=None,  # served by routes/docs.py from the package: FastAPI's default loads a CDN
+        redoc_url=None,
     )
     app.state.settings = settings
     errors.install(app)
@@ -96,7 +98,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         )
         return response
 
-    for module in (models, labels, jobs, search, admin, health, web):
+    for module in (models, labels, jobs, search, admin, health, web, docs):
         app.include_router(module.router)
     return app
 
