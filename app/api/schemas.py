@@ -70,30 +70,66 @@ class LabelsPublic(BaseModel):
 class ModelAccepted(BaseModel):
     model_id: int
     job_id: int | None = Field(description="null when the identical content was already stored")
-    status: str
+    status: str = Field(description="the model's status: queued | ready | failed")
     model: ModelPublic
+    duplicate_of: int | None = Field(
+        None, description="the stored model these bytes already are (its name and label are kept)"
+    )
+    note: str | None = Field(None, description="what happened, when it is not what was asked")
+
+
+# Facts a job records beside its timings (one JSON column in storage): the API shows them as `result`, so
+# `timings` holds seconds only. A stored "result" object is taken as it is; these keys are older rows' form.
+JOB_RESULT_KEYS = frozenset({"vocabulary_id", "models", "pruned_versions", "encoded_after_swap", "note"})
+
+
+def split_job_timings(stored: dict[str, Any]) -> tuple[dict[str, float], dict[str, Any]]:
+    """(seconds per stage, everything else) of a job's stored timings."""
+    result: dict[str, Any] = dict(stored.get("result") or {})
+    timings: dict[str, float] = {}
+    for key, value in stored.items():
+        if key == "result":
+            continue
+        if key in JOB_RESULT_KEYS or isinstance(value, bool) or not isinstance(value, int | float):
+            # counts were stored as floats beside the seconds: show them as the integers they are
+            result[key] = int(value) if isinstance(value, float) and value.is_integer() else value
+        else:
+            timings[key] = float(value)
+    return timings, result
+
+
+JOB_STATUS = "queued | running | done | failed"
+STATE_ALIAS = Field(description="the same as status (its former name), kept for old clients", deprecated=True)
 
 
 class JobPublic(BaseModel):
     id: int
     kind: str
-    state: str
+    status: str = Field(description=JOB_STATUS)
+    state: str = STATE_ALIAS
     model_id: int | None
     attempts: int
     error: str | None
-    timings: dict[str, Any]
+    timings: dict[str, float] = Field(description="seconds per stage")
+    result: dict[str, Any] = Field(description="what the job produced, e.g. vocabulary_id and models")
     payload: dict[str, Any]
     created_at: str
     updated_at: str
 
     @classmethod
     def of(cls, j: JobRecord) -> JobPublic:
-        return cls.model_validate(j, from_attributes=True)  # lease_until, worker: internal, not copied
+        timings, result = split_job_timings(j.timings)
+        return cls(  # lease_until, worker: internal, not copied
+            id=j.id, kind=j.kind, status=j.state, state=j.state, model_id=j.model_id, attempts=j.attempts,
+            error=j.error, timings=timings, result=result, payload=j.payload, created_at=j.created_at,
+            updated_at=j.updated_at,
+        )
 
 
 class JobAccepted(BaseModel):
     job_id: int
-    state: str
+    status: str = Field(description=JOB_STATUS)
+    state: str = STATE_ALIAS
 
 
 class SearchHit(BaseModel):
@@ -137,3 +173,33 @@ class Health(BaseModel):
 class Readiness(BaseModel):
     ready: bool
     checks: dict[str, Any]
+
+
+class ShapeExplained(BaseModel):
+    """One shape at the canonical resolution, its vertices coloured by word (GET /models/{id}/explain)."""
+
+    model_id: int | None = Field(description="null for an uploaded query")
+    name: str
+    label: str | None
+    vertices: list[float] = Field(description="x, y, z of each vertex, flattened (n * 3)")
+    faces: list[int] = Field(description="vertex indices of each triangle, flattened (f * 3)")
+    words: list[int] = Field(description="the visual word of each vertex (hard quantisation), n values")
+    keypoints: list[int] = Field(description="vertex indices of the keypoints")
+    bof: list[float] = Field(description="the Bag-of-Features histogram, one value per word")
+
+
+class WordContribution(BaseModel):
+    word: int
+    shape: float = Field(description="the word's BoF value on the explained shape")
+    against: float = Field(description="its value on the other shape")
+    contribution: float = Field(description="|shape - against|: this word's part of the BoF L1 distance")
+
+
+class Explanation(BaseModel):
+    vocabulary_id: int
+    words: int = Field(description="words in the vocabulary")
+    shape: ShapeExplained
+    against: ShapeExplained | None
+    bof_l1: float | None = Field(description="L1 distance between the two BoF histograms")
+    distance: float | None = Field(description="the distance search ranks by (BoF, fused with Shape-DNA)")
+    top_words: list[WordContribution] = Field(description="the words that separate the shapes most")

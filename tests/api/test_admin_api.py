@@ -65,7 +65,7 @@ def test_rebuild_swaps_versions_while_searches_keep_answering(data_dir, corpus):
             done = wait_job(client, job["job_id"])
             assert done["state"] == "done", done
             assert wait_job(client, up.json()["job_id"])["state"] == "done"
-            new = done["timings"]["vocabulary_id"]
+            new = done["result"]["vocabulary_id"]
             assert new != old
             wait_for(lambda: seen and seen[-1][1] == new, timeout_s=20)
         finally:
@@ -130,7 +130,7 @@ def test_index_rebuild_reencodes_every_model_with_the_current_encode_settings(da
         before = _answers(client, models)
         job = client.post("/admin/index/rebuild", headers=TOKEN).json()
         done = wait_job(client, job["job_id"])
-        assert done["state"] == "done" and done["timings"]["models"] == len(models)
+        assert done["state"] == "done" and done["result"]["models"] == len(models)
         wait_for(lambda: _answers(client, models) != before, timeout_s=20)  # the live index follows
         after = _answers(client, models)
     assert all(hits[0][1] > 0 for hits in after)  # soft BoFs of different shapes never coincide

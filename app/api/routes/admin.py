@@ -17,7 +17,7 @@ router = APIRouter(prefix="/admin", tags=["admin"], responses={401: {"model": Er
 
 def _enqueue(ctx, kind: str, payload: dict) -> JobAccepted:
     job_id, state = maintenance.enqueue_once(ctx, kind, payload)  # a pending one answers instead
-    return JobAccepted(job_id=job_id, state=state)
+    return JobAccepted(job_id=job_id, status=state, state=state)
 
 
 @router.post("/vocabulary/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted)

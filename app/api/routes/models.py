@@ -72,9 +72,26 @@ async def upload_model(request: Request, runtime: RuntimeDep, _: UploadDep) -> J
         job_id=result.job_id,
         status=result.model.status,
         model=ModelPublic.of(result.model),
+        **_duplicate(result, fields.name, fields.label),
     )
     code = status.HTTP_202_ACCEPTED if result.job_id is not None else status.HTTP_200_OK  # new or retried
     return JSONResponse(body.model_dump(), status_code=code)
+
+
+def _duplicate(result: ingestion.Submitted, name: str | None, label: str | None) -> dict:
+    """duplicate_of + note when the bytes were already stored: say which model, and what was not applied."""
+    if result.created:
+        return {}
+    m = result.model
+    note = f"identical content is already stored as model {m.id} ({m.name!r})"
+    sent = (("name", name, m.name), ("label", label, m.label))
+    ignored = [field for field, given, kept in sent if given and given != kept]
+    if ignored:
+        verb = "were" if len(ignored) > 1 else "was"
+        note += f"; its stored {' and '.join(ignored)} {verb} kept, not the one(s) sent"
+    if result.job_id is not None:
+        note += "; it had failed, so it is queued again"
+    return {"duplicate_of": m.id, "note": note}
 
 
 @router.get("", response_model=ModelsPublic)
