@@ -135,7 +135,8 @@ def env_for(data_dir: Path, **extra: str) -> dict[str, str]:
 
 
 def refused_start(env: dict[str, str]) -> tuple[int, list[str]]:
-    """Run `shapebag serve` where it must refuse to start: (exit code, stderr lines)."""
+    """Run `shapebag serve` where it must refuse to start: (exit code, stderr lines), less the CLI's
+    informational "data directory: ..." line (it says which directory it resolved)."""
     p = subprocess.run(
         [sys.executable, "-m", "app.cli", "serve", "--port", "1"],
         env=env,
@@ -143,7 +144,8 @@ def refused_start(env: dict[str, str]) -> tuple[int, list[str]]:
         text=True,
         timeout=120,
     )
-    return p.returncode, p.stderr.strip().splitlines()
+    lines = [ln for ln in p.stderr.strip().splitlines() if not ln.startswith("data directory: ")]
+    return p.returncode, lines
 
 
 def start_server(data_dir: Path, log: Path, **extra: str) -> tuple[Proc, str]:

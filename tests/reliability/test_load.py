@@ -16,8 +16,15 @@ SECONDS = 12.0
 
 
 def test_fifty_clients_mixed_load_without_errors(data_dir, corpus, tmp_path):
+    # admission control is tested in test_query_pool / test_uploads_held; here every request is let
+    # in (queue and upload caps above the 50 clients) to see that they are all answered, in bounded time
     server, base = start_server(
-        data_dir, tmp_path / "s.log", SHAPEBAG_WORKERS="1", SHAPEBAG_QUEUE_LIMIT="100000"
+        data_dir,
+        tmp_path / "s.log",
+        SHAPEBAG_WORKERS="1",
+        SHAPEBAG_QUEUE_LIMIT="100000",
+        SHAPEBAG_SEARCH_QUEUE="64",
+        SHAPEBAG_MAX_CONCURRENT_UPLOADS="64",
     )
     try:
         meshes = Meshes([p for p, _ in corpus.files])
@@ -26,6 +33,7 @@ def test_fifty_clients_mixed_load_without_errors(data_dir, corpus, tmp_path):
         server.stop()
     print("\n" + report(result))
     assert result["errors"] == 0, result["error_samples"]
+    assert result["search"]["shed"] == result["upload"]["shed"] == 0
     assert result["search"]["requests"] >= 10 and result["upload"]["requests"] >= 3
     # bounded: every request answered, none anywhere near the client timeout
     assert result["search"]["max_s"] < 120 and result["upload"]["max_s"] < 120
