@@ -1,7 +1,8 @@
 """Server-side mesh thumbnails: a pure-numpy z-buffer rasteriser + Pillow for the PNG.
 
 No GPU, no display, no OpenGL: the service renders thumbnails inside worker or API processes on a
-headless machine. The mesh is seen from a fixed 3/4 view (orthographic), fitted to the frame by its
+headless machine. The mesh is turned into its canonical view (thumbnail_view.py: principal axes, the side
+with the most silhouette, upright), then seen from a 3/4 view (orthographic), fitted to the frame by its
 projected bounding box, shaded with two-sided Phong-interpolated normals (key + fill light) and
 anti-aliased by supersampling (the ss x ss samples of each pixel are averaged in premultiplied alpha).
 
@@ -16,6 +17,8 @@ import io
 
 import numpy as np
 from PIL import Image
+
+from app.services.thumbnail_view import canonical_rotation
 
 # A pleasant 3/4 view: turn the model 35 degrees about the vertical axis, then tilt it 20 degrees towards
 # the viewer (y is up, the camera looks down -z).
@@ -71,6 +74,7 @@ def render_rgba(
     colour = np.zeros((big * big, 3))
     alpha = np.zeros(big * big)
     if len(v) and len(f) and np.isfinite(v).all():
+        v = (v - v.mean(axis=0)) @ canonical_rotation(v, f).T  # principal axes, most silhouette, upright
         screen, depth, view = _project(v, big)
         pix, face, bary = _rasterise(screen, depth, f, big)
         if pix.size:
