@@ -145,7 +145,10 @@ def test_cli_search_refuses_each_bad_file_with_one_line(served, tmp_path, monkey
         path.parent.mkdir()
         path.write_bytes(case.content)
         code = cli_main(["search", str(path), "--data-dir", str(data)])
-        err = capsys.readouterr().err.strip()
+        # less the CLI's informational "data directory: ..." line (which directory it resolved)
+        err = "\n".join(
+            ln for ln in capsys.readouterr().err.strip().splitlines() if not ln.startswith("data directory: ")
+        )
         if code != 2 or len(err.splitlines()) != 1 or not err.startswith("shapebag search: error: "):
             wrong.append(f"{case.case}: exit {code}, stderr {err[:300]!r}")
     assert not wrong, "\n".join(wrong)
@@ -157,4 +160,5 @@ def test_cli_search_refuses_each_bad_file_with_one_line(served, tmp_path, monkey
         text=True,
         timeout=120,
     )
-    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    lines = [ln for ln in p.stderr.strip().splitlines() if not ln.startswith("data directory: ")]
+    assert p.returncode == 2 and len(lines) == 1, p.stderr
