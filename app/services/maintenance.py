@@ -7,8 +7,10 @@ from pathlib import Path
 
 from app.services import rendering
 from app.services.context import ServiceContext
+from app.services.errors import NotFoundError
 from app.services.query_pool import QueryDescriber
 from app.storage import jobs as jobs_repo
+from app.storage import models as models_repo
 from app.storage import vocabularies as vocab_repo
 from app.storage.blobs import atomic_write
 from app.storage.models import ModelRecord
@@ -45,4 +47,14 @@ async def thumbnail_file(ctx: ServiceContext, pool: QueryDescriber, model: Model
         args = (mesh_path, model.file_type, ctx.settings.max_vertices, size, model.id)
         png = await pool.run(rendering.render_stored, args, "rendering the thumbnail")
         await asyncio.to_thread(atomic_write, path, png)
+        if not await asyncio.to_thread(_exists, ctx, model.id):  # deleted while rendering: no orphan file
+            path.unlink(missing_ok=True)
+            raise NotFoundError(f"no model with id {model.id}")
     return path
+
+
+def _exists(ctx: ServiceContext, model_id: int) -> bool:
+    """Checked after the thumbnail is written: a delete removes thumbnails after its commit, so either
+    it sees this file or this check sees the model gone."""
+    with ctx.db.read() as conn:
+        return models_repo.get(conn, model_id) is not None

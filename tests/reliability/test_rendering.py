@@ -10,7 +10,7 @@ import trimesh
 from fastapi.testclient import TestClient
 
 from app.main import create_app
-from app.services import mesh_policy, rendering
+from app.services import catalog, mesh_policy, rendering
 from tests.conftest import make_settings, wait_for
 from tests.reliability.corpus import obj_text
 
@@ -60,3 +60,22 @@ def test_thumbnails_render_outside_the_api_process_at_fixed_sizes_only(served, m
 def test_a_thumbnail_of_a_missing_model_is_404(served):
     client, _ = served
     assert client.get("/models/999999/thumbnail.png").status_code == 404
+
+
+def test_a_model_deleted_while_its_thumbnail_renders_leaves_no_file(served, monkeypatch):
+    client, data = served
+    runtime = client.app.state.runtime
+    ready = client.get("/models", params={"status": "ready", "limit": 50}).json()["data"]
+    model_id = ready[-1]["id"]  # not the one the other test rendered (its thumbnails are cached)
+    assert not list((data / "thumbnails").glob(f"{model_id}-*.png"))
+    real_run = runtime.describer.run
+
+    async def render_then_delete(*args, **kwargs):
+        png = await real_run(*args, **kwargs)
+        catalog.delete_model(runtime.ctx, runtime.live, model_id)  # lands between render and write
+        return png
+
+    monkeypatch.setattr(runtime.describer, "run", render_then_delete)
+    r = client.get(f"/models/{model_id}/thumbnail.png", params={"size": 128})
+    assert r.status_code == 404
+    assert not list((data / "thumbnails").glob(f"{model_id}-*.png"))
