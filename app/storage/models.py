@@ -29,8 +29,36 @@ def _record(row: sqlite3.Row | None) -> ModelRecord | None:
     if row is None:
         return None
     d = dict(row)
-    d["metadata"] = json.loads(d["metadata"] or "{}")
+    d["metadata"] = _metadata(d["metadata"])
     return ModelRecord(**d)
+
+
+def _metadata(text: str | None) -> dict:
+    """The stored metadata, or a placeholder when a row written before metadata was validated holds
+    something standard JSON cannot carry (NaN, a lone surrogate...): every read must serialise."""
+    try:
+        value = json.loads(text or "{}", parse_constant=_refuse_constant)
+        json.dumps(value, allow_nan=False, ensure_ascii=False).encode("utf-8")
+        if _depth(value) > MAX_READ_DEPTH:
+            raise ValueError("nested too deep")
+    except (ValueError, RecursionError, UnicodeEncodeError):
+        return {"unreadable": "the stored metadata is not standard JSON; upload the model again to fix it"}
+    return value if isinstance(value, dict) else {}
+
+
+MAX_READ_DEPTH = 64  # pydantic's serialiser gives up (500) well before json does
+
+
+def _depth(value: object) -> int:
+    if isinstance(value, dict):
+        return 1 + max((_depth(v) for v in value.values()), default=0)
+    if isinstance(value, list):
+        return 1 + max((_depth(v) for v in value), default=0)
+    return 0
+
+
+def _refuse_constant(name: str) -> None:
+    raise ValueError(f"{name} is not standard JSON")
 
 
 def insert(

@@ -175,3 +175,30 @@ def test_a_failed_model_is_retried_by_uploading_its_bytes_again(served):
     wait_for(lambda: client.get(f"/models/{model_id}").json()["status"] == "ready", timeout_s=60)
     third = client.post("/models", content=multipart("retry.obj", data), headers=MULTIPART_HEADERS)
     assert third.status_code == 200 and third.json()["job_id"] is None  # ready: plain deduplication
+
+
+def test_rows_stored_before_validation_still_serialise(served):
+    """A database written before metadata was validated may hold NaN, lone surrogates, deep nesting
+    or huge integers: those rows read back with a placeholder instead of failing every page (500)."""
+    client, data = served
+    ctx = client.app.state.runtime.ctx
+    legacy = {
+        "nan": '{"a": NaN}',
+        "surrogate": '{"a": "\\ud800"}',
+        "deep": '{"a": ' * 300 + "1" + "}" * 300,
+        "digits": '{"a": ' + "9" * 5000 + "}",
+        "not-an-object": "[1, 2]",
+    }
+    ids = {}
+    for i, (case, text) in enumerate(legacy.items()):
+        data_bytes = _mesh(200 + i)
+        sub = ingestion.submit(ctx, data_bytes, f"{case}.obj")
+        with ctx.db.write() as conn:  # as an old version stored it, unchecked
+            conn.execute("UPDATE models SET metadata = ? WHERE id = ?", (text, sub.model.id))
+        ids[case] = sub.model.id
+    for case, model_id in ids.items():
+        r = client.get(f"/models/{model_id}")
+        assert r.status_code == 200, (case, r.text[:200])
+        meta = r.json()["metadata"]
+        assert meta == {} if case == "not-an-object" else "unreadable" in meta, (case, meta)
+    assert client.get("/models", params={"limit": 500}).status_code == 200
