@@ -202,3 +202,18 @@ def test_rows_stored_before_validation_still_serialise(served):
         meta = r.json()["metadata"]
         assert meta == {} if case == "not-an-object" else "unreadable" in meta, (case, meta)
     assert client.get("/models", params={"limit": 500}).status_code == 200
+
+
+def test_a_mesh_whose_file_just_left_is_404_not_500(served):
+    """GET /models/{id}/mesh read the row, then a delete took the file: before, FileResponse failed (500)."""
+    client, _ = served
+    ctx = client.app.state.runtime.ctx
+    sub = ingestion.submit(ctx, _mesh(300), "leaving.obj")
+    hidden = ctx.blobs.hide_mesh(sub.model.sha256, "obj")  # the state inside a delete's transaction
+    assert hidden is not None
+    try:
+        r = client.get(f"/models/{sub.model.id}/mesh")
+        assert r.status_code == 404 and r.json()["error"]["code"] == "not_found"
+    finally:
+        hidden.rename(ctx.blobs.mesh_path(sub.model.sha256, "obj"))
+    assert client.get(f"/models/{sub.model.id}/mesh").status_code == 200

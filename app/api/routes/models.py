@@ -24,7 +24,7 @@ from app.api.schemas import (
 )
 from app.api.uploads import multipart_body, read_form
 from app.services import catalog, ingestion, maintenance, metadata, rendering, search
-from app.services.errors import InvalidInputError
+from app.services.errors import InvalidInputError, NotFoundError
 
 router = APIRouter(prefix="/models", tags=["models"])
 ERRORS: dict[int | str, dict] = {c: {"model": ErrorResponse} for c in (404, 413, 422, 503)}
@@ -115,6 +115,8 @@ def get_model(model_id: IdPath, ctx: CtxDep) -> ModelPublic:
 def get_mesh(model_id: IdPath, ctx: CtxDep) -> FileResponse:
     model = catalog.get_model(ctx, model_id)
     path = ctx.blobs.mesh_path(model.sha256, model.file_type)
+    if not path.is_file():  # deleted a moment ago (the file leaves in the delete's transaction)
+        raise NotFoundError(f"no model with id {model_id}")
     media = mimetypes.guess_type(f"x.{model.file_type}")[0] or "application/octet-stream"
     return FileResponse(path, media_type=media, filename=f"{model.name}.{model.file_type}")
 
