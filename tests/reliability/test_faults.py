@@ -39,6 +39,7 @@ from tests.reliability.helpers import (
 
 pytestmark = pytest.mark.slow
 TOKEN = {"X-Admin-Token": "reliability-secret"}
+HOOKS = Path(__file__).resolve().parent / "hooks"
 SLOW_DESCRIBE = {
     "SHAPEBAG_DESCRIBE__K": "300",
     "SHAPEBAG_DESCRIBE__M": "100",
@@ -152,15 +153,20 @@ def test_server_killed_during_ingestion_loses_nothing(data_dir, corpus, tmp_path
 def test_server_killed_during_vocabulary_rebuild_recovers(data_dir, tmp_path):
     extra = {"SHAPEBAG_WORKERS": "1", "SHAPEBAG_LEASE_SECONDS": "2"}
     before = consistent(data_dir)
-    server, base = start_server(data_dir, tmp_path / "a.log", **extra)
+    # the worker's fit waits at a barrier (tests/reliability/hooks/sitecustomize.py): the kill lands
+    # mid-rebuild for certain, however fast or loaded the machine
+    barrier = tmp_path / "release-fit"
+    held = {"PYTHONPATH": str(HOOKS), "SHAPEBAG_TEST_HOLD_FIT": str(barrier)}
+    server, base = start_server(data_dir, tmp_path / "a.log", **extra, **held)
     with httpx.Client(base_url=base, timeout=60) as http:
         wait_for(lambda: http.get("/readyz").status_code == 200, timeout_s=60)
         r = http.post("/admin/vocabulary/rebuild", json={"size": 24, "run": "run5"}, headers=TOKEN)
         assert r.status_code == 202, r.text
         job_id = r.json()["job_id"]
-        wait_for(lambda: _job(http, job_id)["state"] != "queued", timeout_s=60, interval_s=0.02)
-        server.kill9()  # at once: the whole rebuild takes well under a second here
+        wait_for(lambda: Path(f"{barrier}.entered").exists(), timeout_s=120)
+        server.kill9()
     state_at_kill = job_state(data_dir, job_id)
+    assert state_at_kill == "running", state_at_kill  # killed mid-rebuild, not before or after
     server, base = start_server(data_dir, tmp_path / "b.log", **extra)
     try:
         with httpx.Client(base_url=base, timeout=60) as http:
