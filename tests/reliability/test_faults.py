@@ -40,11 +40,11 @@ from tests.reliability.helpers import (
 pytestmark = pytest.mark.slow
 TOKEN = {"X-Admin-Token": "reliability-secret"}
 HOOKS = Path(__file__).resolve().parent / "hooks"
-SLOW_DESCRIBE = {
-    "SHAPEBAG_DESCRIBE__K": "300",
-    "SHAPEBAG_DESCRIBE__M": "100",
-    "SHAPEBAG_DESCRIBE__TARGET_VERTICES": "1000",
-}
+
+
+def hold(target: str, barrier: Path) -> dict[str, str]:
+    """Environment that holds `module:function` at `barrier` in a real process (hooks/sitecustomize.py)."""
+    return {"PYTHONPATH": str(HOOKS), "SHAPEBAG_TEST_HOLD": target, "SHAPEBAG_TEST_HOLD_FILE": str(barrier)}
 
 
 def consistent(data_dir: Path) -> dict:
@@ -108,10 +108,12 @@ def test_killed_worker_job_completes_after_its_lease_with_exactly_one_model(tmp_
         with httpx.Client(base_url=base, timeout=60) as http:
             path, label = corpus.seeded[0]
             job_id = _upload(http, path, label)["job_id"]
-            env = env_for(data, SHAPEBAG_LEASE_SECONDS="2", **SLOW_DESCRIBE)
-            workers.append(Proc(["worker"], env, tmp_path / "worker1.log"))
-            wait_for(lambda: _job(http, job_id)["state"] != "queued", timeout_s=120, interval_s=0.05)
-            workers[0].kill9()  # mid-describe (the slow spectrum takes seconds)
+            env = env_for(data, SHAPEBAG_LEASE_SECONDS="2")
+            barrier = tmp_path / "release-describe"  # the first worker's describe waits here, for ever
+            held = {**env, **hold("app.services.ingestion:describe", barrier)}
+            workers.append(Proc(["worker"], held, tmp_path / "worker1.log"))
+            wait_for(lambda: Path(f"{barrier}.entered").exists(), timeout_s=120)
+            workers[0].kill9()  # mid-describe, for certain
             job = _job(http, job_id)
             assert job["state"] == "running" and job["attempts"] == 1, job
             workers.append(Proc(["worker"], env, tmp_path / "worker2.log"))
@@ -156,7 +158,7 @@ def test_server_killed_during_vocabulary_rebuild_recovers(data_dir, tmp_path):
     # the worker's fit waits at a barrier (tests/reliability/hooks/sitecustomize.py): the kill lands
     # mid-rebuild for certain, however fast or loaded the machine
     barrier = tmp_path / "release-fit"
-    held = {"PYTHONPATH": str(HOOKS), "SHAPEBAG_TEST_HOLD_FIT": str(barrier)}
+    held = hold("app.services.vocabularies:fit_vocabulary", barrier)
     server, base = start_server(data_dir, tmp_path / "a.log", **extra, **held)
     with httpx.Client(base_url=base, timeout=60) as http:
         wait_for(lambda: http.get("/readyz").status_code == 200, timeout_s=60)

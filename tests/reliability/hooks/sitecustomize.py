@@ -1,28 +1,31 @@
-"""Test-only: hold a real server's vocabulary fit at a barrier, so a kill lands mid-rebuild for sure.
+"""Test-only: hold a function of a real server or worker at a barrier, so a kill lands mid-step for sure.
 
-Put this directory on PYTHONPATH and set SHAPEBAG_TEST_HOLD_FIT=<path>: in every interpreter started
-with that environment (the server and its spawned workers), fit_vocabulary touches <path>.entered and
-then waits until <path> exists. Nothing in the package knows about it.
+Put this directory on PYTHONPATH and set SHAPEBAG_TEST_HOLD=<module>:<function> and
+SHAPEBAG_TEST_HOLD_FILE=<path>: in every interpreter started with that environment (the server and its
+spawned workers), the function touches <path>.entered and then waits until <path> exists. Nothing in
+the package knows about it.
 """
 
 from __future__ import annotations
 
 import os
 
-_BARRIER = os.environ.get("SHAPEBAG_TEST_HOLD_FIT")
+_TARGET = os.environ.get("SHAPEBAG_TEST_HOLD")
+_BARRIER = os.environ.get("SHAPEBAG_TEST_HOLD_FILE")
 
-if _BARRIER:
+if _TARGET and _BARRIER:
+    import importlib
     import time
     from pathlib import Path
 
-    import app.services.vocabularies as _vocabularies
+    _module_name, _function = _TARGET.split(":")
+    _module = importlib.import_module(_module_name)
+    _real = getattr(_module, _function)
 
-    _real_fit = _vocabularies.fit_vocabulary
-
-    def _held_fit(*args, **kwargs):
+    def _held(*args, **kwargs):
         Path(f"{_BARRIER}.entered").touch()
         while not Path(_BARRIER).exists():
             time.sleep(0.05)
-        return _real_fit(*args, **kwargs)
+        return _real(*args, **kwargs)
 
-    _vocabularies.fit_vocabulary = _held_fit
+    setattr(_module, _function, _held)
