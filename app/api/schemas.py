@@ -181,7 +181,9 @@ class ShapeExplained(BaseModel):
     model_id: int | None = Field(description="null for an uploaded query")
     name: str
     label: str | None
-    vertices: list[float] = Field(description="x, y, z of each vertex, flattened (n * 3)")
+    vertices: list[float] = Field(
+        description="x, y, z of each vertex, flattened (n * 3): centred, turned as the thumbnail (y up)"
+    )
     faces: list[int] = Field(description="vertex indices of each triangle, flattened (f * 3)")
     words: list[int] = Field(description="the visual word of each vertex (hard quantisation), n values")
     keypoints: list[int] = Field(description="vertex indices of the keypoints")

@@ -23,6 +23,7 @@ from app.core.vocabulary import EncodeParams, Vocabulary
 from app.services.context import ServiceContext
 from app.services.errors import ConflictError, InvalidInputError, NotFoundError
 from app.services.mesh_policy import load_upload
+from app.services.thumbnail_view import canonical_rotation
 from app.storage.models import ModelRecord
 
 TOP_WORDS = 8
@@ -30,7 +31,7 @@ TOP_WORDS = 8
 
 @dataclass(frozen=True)
 class Geometry:
-    vertices: np.ndarray  # (n, 3) float32, canonical resolution, the input's own coordinates
+    vertices: np.ndarray  # (n, 3) float32, canonical resolution, centred, in the thumbnail's view frame
     faces: np.ndarray  # (f, 3) int32
 
 
@@ -61,7 +62,11 @@ class Explanation:
 
 def _canonical(mesh: Mesh, params: DescribeParams) -> Geometry:
     fine = to_resolution(mesh, params.target_vertices, subdivision=params.subdivision)
-    return Geometry(fine.vertices.astype(np.float32), fine.faces.astype(np.int32))
+    # centred and turned as the thumbnails are (upright, largest silhouette facing the camera): a viewer
+    # opens on the same picture as the card it came from
+    v = fine.vertices.astype(np.float64)
+    v = (v - v.mean(axis=0)) @ canonical_rotation(v, fine.faces).T
+    return Geometry(v.astype(np.float32), fine.faces.astype(np.int32))
 
 
 def stored_geometry(path: str, file_type: str, params: DescribeParams, max_vertices: int) -> Geometry:

@@ -49,7 +49,8 @@ def test_a_jobs_timings_hold_seconds_only_and_the_rest_is_its_result() -> None:
 
 
 def test_a_stored_result_object_and_text_values_go_to_result() -> None:
-    timings, result = split_job_timings({"load": 0.1, "note": "model deleted", "result": {"vocabulary_id": 2}})
+    stored = {"load": 0.1, "note": "model deleted", "result": {"vocabulary_id": 2}}
+    timings, result = split_job_timings(stored)
     assert timings == {"load": 0.1} and result == {"note": "model deleted", "vocabulary_id": 2}
 
 

@@ -2,7 +2,7 @@
 "use strict";
 
 const PAGE_SIZE = 24;
-const state = { offset: 0, count: 0, label: "", status: "", labels: new Set(), ticket: 0 };
+const state = { offset: 0, count: 0, label: "", status: "", labels: new Set(), ticket: 0, disposeCompare: null };
 const $ = (id) => document.getElementById(id);
 
 // ---- API ------------------------------------------------------------------------------------------
@@ -53,10 +53,16 @@ const fmtSeconds = (s) => (s >= 1 ? `${s.toFixed(2)} s` : `${Math.max(1, Math.ro
 const fmtBytes = (n) => (n > 1048576 ? `${(n / 1048576).toFixed(1)} MB` : `${Math.ceil(n / 1024)} KB`);
 
 function thumb(src, alt, lazy = false) {
-  // lazy only in the long browse grid: ranked results are few and should all show at once
-  const img = el("img", lazy ? { src, alt, loading: "lazy", decoding: "async" } : { src, alt, decoding: "async" });
-  img.addEventListener("error", () => img.classList.add("broken"));
-  return el("div", { class: "thumb" }, img);
+  // a placeholder until the server's rendering arrives (the first one of a model takes a moment), and
+  // words instead of a blank square when there is none; lazy only in the long browse grid
+  const box = el("div", { class: "thumb pending", title: "rendering…" });
+  if (!src) { box.className = "thumb failed"; box.title = "no preview"; return box; }
+  const img = el("img", lazy ? { alt, loading: "lazy", decoding: "async" } : { alt, decoding: "async" });
+  img.addEventListener("load", () => { box.className = "thumb"; box.title = ""; });
+  img.addEventListener("error", () => { img.classList.add("broken"); box.className = "thumb failed"; box.title = "no preview"; });
+  img.src = src;
+  box.append(img);
+  return box;
 }
 
 function labelChip(label) {
@@ -80,29 +86,69 @@ function renderResults(container, query, response) {
       query.label !== undefined ? labelChip(query.label) : el("span", { class: "chip none" }, query.detail || ""),
     ),
   );
+  const byModel = query.modelId !== undefined;  // a search by a stored model: its label is known
   const hits = response.data.map((hit) => {
-    const same = query.label && hit.label === query.label;
+    const same = byModel && query.label && hit.label === query.label;
+    const neighbours = el("button", {
+      class: "similar-link", title: "models similar to this one",
+      onclick: (event) => { event.stopPropagation(); showSimilar(hit.model_id); },
+    }, "similar ›");
     return el("div", {
       class: `card hit${same ? " same" : ""}`, dataset: { modelId: hit.model_id }, tabindex: "0",
-      title: "show models similar to this one", onclick: () => showSimilar(hit.model_id),
+      title: "open in 3D: why it matched", onclick: () => openCompare(container, query, hit),
+      onkeydown: (event) => { if (event.key === "Enter") openCompare(container, query, hit); },
     },
       el("div", { class: "rank" }, `#${hit.rank}`),
+      same ? el("div", { class: "mark same-label", title: `same label as the query (${query.label})` }, "✓ same label") : null,
       thumb(thumbUrl(hit.model_id), hit.name),
       el("div", { class: "meta" },
         el("div", { class: "name", title: hit.name }, hit.name),
         labelChip(hit.label),
-        el("div", { class: "distance" }, `L1 ${hit.distance.toFixed(3)}`),
+        el("div", { class: "row" }, el("span", { class: "distance" }, `L1 ${hit.distance.toFixed(3)}`), neighbours),
       ),
     );
   });
+  const shared = byModel && query.label ? response.data.filter((h) => h.label === query.label).length : null;
   const heading = el("div", { class: "results-head" },
     el("h2", {}, `Top ${response.count} for “${query.name}”`),
+    shared !== null ? el("span", { class: "shared" }, `${shared} of ${response.count} share its label “${query.label}”`) : null,
     el("span", { class: "timing" }, timing.join(" · ")),
   );
   const body = response.count
     ? el("div", { class: "results-row" }, queryCard, el("div", { class: "hits" }, hits))
     : el("div", { class: "results-row" }, queryCard, el("p", { class: "empty" }, "No indexed model to compare with yet."));
-  container.append(el("section", { class: "results", id: container.id + "-section" }, heading, body));
+  const hint = response.count ? el("p", { class: "hint" }, "Click a result to see both shapes in 3D and why they matched.") : null;
+  container.append(el("section", { class: "results", id: container.id + "-section" }, heading, body, hint),
+    el("section", { class: "compare", id: container.id + "-compare", hidden: "" }));
+}
+
+// ---- 3D viewer + why it matched, in the same tab, under the results ---------------------------------------
+async function openCompare(container, query, hit) {
+  clearError();
+  const out = container.querySelector(".compare");
+  if (state.disposeCompare) { state.disposeCompare(); state.disposeCompare = null; }
+  out.hidden = false;
+  out.replaceChildren(el("div", { class: "loading" }, el("span", { class: "spinner" }), `Comparing with ${hit.name}…`));
+  out.scrollIntoView({ behavior: "smooth", block: "start" });
+  for (const card of container.querySelectorAll(".card.hit")) card.classList.toggle("selected", card === document.activeElement || +card.dataset.modelId === hit.model_id);
+  try {
+    let explanation;
+    if (query.modelId !== undefined) {
+      explanation = await api(`/models/${query.modelId}/explain?against=${hit.model_id}`);
+    } else {
+      const form = new FormData();
+      form.append("file", query.file, query.file.name);
+      form.append("against", String(hit.model_id));
+      explanation = await api("/explain", { method: "POST", body: form });
+    }
+    const viewer = await import("/static/viewer.js");
+    state.disposeCompare = viewer.renderCompare(out, explanation);
+    out.scrollIntoView({ block: "start" });
+  } catch (err) {
+    out.replaceChildren();
+    out.hidden = true;
+    showError(`Could not compare with ${hit.name}: ${err.message}`);
+  }
 }
 
 // ---- search by upload ----------------------------------------------------------------------------------
@@ -110,7 +156,7 @@ async function runSearch(file) {
   clearError();
   const out = $("search-results");
   out.replaceChildren(el("div", { class: "loading" }, el("span", { class: "spinner" }), `Describing ${file.name}…`));
-  const query = { name: file.name, thumbnail: "", detail: fmtBytes(file.size) };
+  const query = { name: file.name, thumbnail: "", detail: fmtBytes(file.size), file };
 
   const form = new FormData();
   form.append("file", file, file.name);
@@ -208,7 +254,7 @@ async function showSimilar(modelId) {
       api(`/models/${modelId}`),
       api(`/models/${modelId}/similar?k=${$("k").value}`),
     ]);
-    renderResults(out, { name: model.name, label: model.label, thumbnail: thumbUrl(model.id) }, response);
+    renderResults(out, { name: model.name, label: model.label, thumbnail: thumbUrl(model.id), modelId: model.id }, response);
     const close = el("button", { class: "button ghost", onclick: () => out.replaceChildren() }, "Close");
     out.querySelector(".results-head").append(close);
     out.scrollIntoView({ behavior: "smooth", block: "start" });
@@ -253,6 +299,13 @@ async function refreshStatus() {
   }
 }
 
+// #browse, or #similar/<id> (a shareable link to one model's neighbours)
+function route() {
+  const [name, arg] = location.hash.slice(1).split("/");
+  if (name === "similar" && arg) { selectTab("browse"); showSimilar(Number(arg)); }
+  else selectTab(name === "browse" ? "browse" : "search");
+}
+
 function init() {
   for (const tab of document.querySelectorAll(".tab[data-tab]")) {
     tab.addEventListener("click", () => selectTab(tab.dataset.tab));
@@ -268,10 +321,8 @@ function init() {
   $("prev").addEventListener("click", () => { state.offset = Math.max(0, state.offset - PAGE_SIZE); loadPage(); });
   $("next").addEventListener("click", () => { state.offset += PAGE_SIZE; loadPage(); });
 
-  // #browse, or #similar/<id> (a shareable link to one model's neighbours)
-  const [route, arg] = location.hash.slice(1).split("/");
-  if (route === "similar" && arg) { selectTab("browse"); showSimilar(Number(arg)); }
-  else selectTab(route === "browse" ? "browse" : "search");
+  route();
+  window.addEventListener("hashchange", route);  // a link or a typed #similar/<id> on the open page
   loadLabels();
   refreshStatus();
   setInterval(refreshStatus, 15000);

@@ -14,7 +14,7 @@ cd "$tmp"
 npm install --silent --no-save --no-package-lock "three@$THREE" "swagger-ui-dist@$SWAGGER" "esbuild@$ESBUILD"
 cat > entry.js <<'JS'
 export {
-  AmbientLight, BufferAttribute, BufferGeometry, Color, DirectionalLight, Group, HemisphereLight, Mesh,
+  AmbientLight, BufferAttribute, BufferGeometry, Color, DirectionalLight, DoubleSide, Group, HemisphereLight, Mesh,
   MeshLambertMaterial, PerspectiveCamera, Points, PointsMaterial, Scene, Vector3, WebGLRenderer,
 } from "three";
 export { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
