@@ -155,7 +155,14 @@ async function openCompare(container, query, hit) {
 async function runSearch(file) {
   clearError();
   const out = $("search-results");
-  out.replaceChildren(el("div", { class: "loading" }, el("span", { class: "spinner" }), `Describing ${file.name}…`));
+  // elapsed seconds while the server works: a large mesh takes a while (upload, resample, eigen-solve, encode)
+  const started = performance.now();
+  const progress = el("span", { class: "elapsed" }, `Describing ${file.name}…`);
+  out.replaceChildren(el("div", { class: "loading" }, el("span", { class: "spinner" }), progress));
+  const ticker = setInterval(() => {
+    const s = Math.round((performance.now() - started) / 1000);
+    progress.textContent = `Describing ${file.name}… ${s} s (upload, resample, eigen-solve, encode)`;
+  }, 1000);
   const query = { name: file.name, thumbnail: "", detail: fmtBytes(file.size), file };
 
   const form = new FormData();
@@ -174,6 +181,8 @@ async function runSearch(file) {
   } catch (err) {
     out.replaceChildren();
     showError(`Search failed: ${err.message}`);
+  } finally {
+    clearInterval(ticker);
   }
 }
 
