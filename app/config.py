@@ -56,6 +56,7 @@ class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="SHAPEBAG_", env_nested_delimiter="__", extra="ignore")
 
     data_dir: Path = Path("var/data")
+    database_url: str = ""  # empty: SQLite in data_dir; postgresql://...: shared state there (docs/deploy.md)
     host: str = "127.0.0.1"
     port: int = 8000
     workers: int = Field(default_factory=lambda: os.cpu_count() or 1, ge=0)  # embedded ingestion processes

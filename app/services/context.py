@@ -9,6 +9,7 @@ from app.config import Settings
 from app.index import FILE_NAMES
 from app.storage.blobs import BlobStore
 from app.storage.db import Database
+from app.storage.engine import open_database
 
 
 @dataclass(frozen=True)
@@ -33,6 +34,6 @@ def open_context(settings: Settings) -> ServiceContext:
     data_dir = Path(settings.data_dir).resolve()
     settings = settings.model_copy(update={"data_dir": data_dir})
     data_dir.mkdir(parents=True, exist_ok=True)
-    db = Database(data_dir / "shapebag.db")
+    db = open_database(data_dir, settings.database_url)
     db.migrate()
     return ServiceContext(settings=settings, db=db, blobs=BlobStore(data_dir))

@@ -81,7 +81,10 @@ def utcnow() -> str:
 
 
 class Database:
-    """The data directory's shapebag.db."""
+    """The data directory's shapebag.db (storage/postgres.py: the same interface on PostgreSQL)."""
+
+    dialect = "sqlite"
+    skip_locked = ""  # the claim's row-lock clause: none here, the write lock already serialises
 
     def __init__(self, path: str | Path, busy_timeout_s: float = 30.0) -> None:
         self.path = Path(path)
@@ -117,6 +120,12 @@ class Database:
             conn.execute("COMMIT")
         finally:
             conn.close()
+
+    @contextmanager
+    def queue(self) -> Iterator[sqlite3.Connection]:
+        """The job queue's transaction: the write lock here; row locks only on PostgreSQL."""
+        with self.write() as conn:
+            yield conn
 
     def migrate(self) -> int:
         """Create/upgrade the schema; returns the schema version. Safe to call from every process."""

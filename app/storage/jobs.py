@@ -1,6 +1,7 @@
 """Repository of jobs: a small queue in SQLite with leases.
 
-A worker claims the oldest runnable job in one BEGIN IMMEDIATE transaction and holds it for
+A worker claims the oldest runnable job in one transaction (SQLite: BEGIN IMMEDIATE; PostgreSQL: row
+locks, `FOR UPDATE SKIP LOCKED`, so claims on many hosts do not wait on each other) and holds it for
 `lease_seconds`; if the worker dies, the lease expires and another worker takes the job again,
 until `max_attempts` claims have been spent.
 """
@@ -70,10 +71,10 @@ def latest_for_model(conn: sqlite3.Connection, model_id: int) -> JobRecord | Non
 def claim(db: Database, worker: str, lease_seconds: float, max_attempts: int) -> JobRecord | None:
     """Take the oldest queued job, or one whose lease expired; give up on jobs out of attempts."""
     now = time.time()
-    with db.write() as conn:
+    with db.queue() as conn:
         spent = conn.execute(
             "SELECT id, model_id, attempts FROM jobs"
-            " WHERE state = 'running' AND lease_until < ? AND attempts >= ?",
+            " WHERE state = 'running' AND lease_until < ? AND attempts >= ?" + db.skip_locked,
             (now, max_attempts),
         ).fetchall()
         for row in spent:
@@ -87,7 +88,7 @@ def claim(db: Database, worker: str, lease_seconds: float, max_attempts: int) ->
                 )
         row = conn.execute(
             "SELECT * FROM jobs WHERE state = 'queued' OR (state = 'running' AND lease_until < ?)"
-            " ORDER BY id LIMIT 1",
+            " ORDER BY id LIMIT 1" + db.skip_locked,
             (now,),
         ).fetchone()
         if row is None:
@@ -103,7 +104,7 @@ def claim(db: Database, worker: str, lease_seconds: float, max_attempts: int) ->
 
 def extend_lease(db: Database, job_id: int, worker: str, lease_seconds: float) -> bool:
     """Keep a long job's lease alive; False if the job is no longer ours."""
-    with db.write() as conn:
+    with db.queue() as conn:
         cur = conn.execute(
             "UPDATE jobs SET lease_until = ? WHERE id = ? AND worker = ? AND state = 'running'",
             (time.time() + lease_seconds, job_id, worker),
@@ -156,7 +157,7 @@ def pending(conn: sqlite3.Connection, kind: str) -> JobRecord | None:
 
 
 def heartbeat(db: Database, worker: str, pid: int) -> None:
-    with db.write() as conn:
+    with db.queue() as conn:
         conn.execute(
             "INSERT INTO workers (name, pid, last_seen) VALUES (?, ?, ?)"
             " ON CONFLICT(name) DO UPDATE SET pid = excluded.pid, last_seen = excluded.last_seen",

@@ -1,4 +1,5 @@
-"""The SQLite job queue: claims are exclusive, leases expire into retries, attempts run out into failure."""
+"""The job queue, on SQLite and PostgreSQL (tests/storage/conftest.py): claims are exclusive, leases
+expire into retries, attempts run out into failure."""
 
 from __future__ import annotations
 
@@ -8,14 +9,6 @@ from types import SimpleNamespace
 
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
-from app.storage.db import Database
-
-
-def _db(tmp_path) -> Database:
-    db = Database(tmp_path / "q.db")
-    db.migrate()
-    db.migrate()  # idempotent
-    return db
 
 
 def _model(db) -> int:
@@ -25,16 +18,15 @@ def _model(db) -> int:
         )
 
 
-def test_wal_mode_and_schema_version(tmp_path):
-    db = _db(tmp_path)
+def test_schema_version_and_wal_mode(db):
     with db.read() as conn:
-        assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
         assert [r[0] for r in conn.execute("SELECT version FROM schema_migrations")] == [1]
+        if db.dialect == "sqlite":
+            assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
     assert db.ping()
 
 
-def test_claims_are_exclusive_under_concurrency(tmp_path):
-    db = _db(tmp_path)
+def test_claims_are_exclusive_under_concurrency(db):
     with db.write() as conn:
         for _ in range(40):
             jobs_repo.enqueue(conn, "ingest")
@@ -54,11 +46,10 @@ def test_claims_are_exclusive_under_concurrency(tmp_path):
     assert sorted(claimed) == list(range(1, 41))  # each job exactly once
 
 
-def test_expired_lease_is_retried_then_fails_with_reason(tmp_path, monkeypatch):
+def test_expired_lease_is_retried_then_fails_with_reason(db, monkeypatch):
     # a clock the test moves (not 50 ms leases and sleeps, which a loaded machine outran)
     clock = {"now": 1_000_000.0}
     monkeypatch.setattr(jobs_repo, "time", SimpleNamespace(time=lambda: clock["now"]))
-    db = _db(tmp_path)
     mid = _model(db)
     with db.write() as conn:
         job_id = jobs_repo.enqueue(conn, "ingest", model_id=mid)
@@ -78,10 +69,9 @@ def test_expired_lease_is_retried_then_fails_with_reason(tmp_path, monkeypatch):
     assert model.status == "failed" and model.error == job.error
 
 
-def test_extend_lease_only_for_the_owner(tmp_path, monkeypatch):
+def test_extend_lease_only_for_the_owner(db, monkeypatch):
     clock = {"now": 1_000_000.0}
     monkeypatch.setattr(jobs_repo, "time", SimpleNamespace(time=lambda: clock["now"]))
-    db = _db(tmp_path)
     with db.write() as conn:
         jobs_repo.enqueue(conn, "rebuild_index")
     job = jobs_repo.claim(db, "a", lease_seconds=10, max_attempts=3)
@@ -93,8 +83,7 @@ def test_extend_lease_only_for_the_owner(tmp_path, monkeypatch):
     assert jobs_repo.claim(db, "b", lease_seconds=60, max_attempts=3).worker == "b"  # now it has expired
 
 
-def test_queue_depth_and_pending(tmp_path):
-    db = _db(tmp_path)
+def test_queue_depth_and_pending(db):
     with db.write() as conn:
         jobs_repo.enqueue(conn, "ingest")
         jobs_repo.enqueue(conn, "rebuild_vocabulary")
