@@ -12,7 +12,7 @@ VOCAB_CLASSES   ?= 8
 VOCAB_PER_CLASS ?= 12
 
 .DEFAULT_GOAL := help
-.PHONY: help install run serve test test-fast chromium lint format evaluate vocabulary bench docker-lint docker-test clean clean-demo clean-data
+.PHONY: help install run serve test test-fast test-scale postgres chromium lint format evaluate vocabulary bench docker-lint docker-test clean clean-demo clean-data
 
 help:  ## list the commands
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) \
@@ -39,6 +39,12 @@ test: install chromium  ## the whole suite, ~10 min on 2 cores; starts (then sto
 
 chromium:  ## Debian's chromium for the browser tests (installed as root; otherwise says they will skip)
 	@bash .ci/chromium.sh
+
+test-scale: install postgres  ## the storage suite on a throwaway PostgreSQL server (claim race, killed worker)
+	SHAPEBAG_TEST_POSTGRES=1 $(BIN)/pytest -q -ra -m postgres tests/storage
+
+postgres:  ## Debian's postgresql for test-scale (installed as root; otherwise says its cases will skip)
+	@bash .ci/postgres.sh
 
 test-fast: install  ## the suite without slow (dataset-wide, multi-process) tests
 	$(BIN)/pytest -q -m "not slow and not docker"
