@@ -40,8 +40,8 @@ test: install chromium  ## the whole suite, ~10 min on 2 cores; starts (then sto
 chromium:  ## Debian's chromium for the browser tests (installed as root; otherwise says they will skip)
 	@bash .ci/chromium.sh
 
-test-scale: install postgres  ## the storage suite on a throwaway PostgreSQL server (claim race, killed worker)
-	SHAPEBAG_TEST_POSTGRES=1 $(BIN)/pytest -q -ra -m postgres tests/storage
+test-scale: install postgres  ## storage + service flow on a throwaway PostgreSQL (claim race, killed worker)
+	SHAPEBAG_TEST_POSTGRES=1 $(BIN)/pytest -q -ra -m postgres tests/storage tests/services/test_both_engines.py
 
 postgres:  ## Debian's postgresql for test-scale (installed as root; otherwise says its cases will skip)
 	@bash .ci/postgres.sh

@@ -14,6 +14,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from itertools import count
 
+import pytest
+
 OPT_IN = "SHAPEBAG_TEST_POSTGRES"
 EXTERNAL = "SHAPEBAG_TEST_DATABASE_URL"
 _names = count()
@@ -100,3 +102,23 @@ def fresh_database(admin_url: str) -> str:
         conn.execute(f'DROP DATABASE IF EXISTS "{name}"')
         conn.execute(f'CREATE DATABASE "{name}" TEMPLATE template0')
     return admin_url.rsplit("/", 1)[0] + f"/{name}"
+
+
+# Fixtures: import them into a conftest or test module (`from tests.pg_server import db_url, pg_admin_url`).
+
+
+@pytest.fixture(scope="session")
+def pg_admin_url() -> Iterator[str]:
+    try:
+        with server() as url:
+            yield url
+    except Unavailable as exc:
+        pytest.skip(f"PostgreSQL: {exc}")
+
+
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
+def db_url(request: pytest.FixtureRequest) -> str:
+    """'' (SQLite in the data directory) or the URL of a fresh PostgreSQL database."""
+    if request.param == "sqlite":
+        return ""
+    return fresh_database(request.getfixturevalue("pg_admin_url"))

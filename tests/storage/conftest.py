@@ -7,28 +7,11 @@ import pytest
 
 from app.storage.db import Database
 from app.storage.engine import open_database
-from tests import pg_server
-
-
-@pytest.fixture(scope="session")
-def pg_admin_url():
-    try:
-        with pg_server.server() as url:
-            yield url
-    except pg_server.Unavailable as exc:
-        pytest.skip(f"PostgreSQL: {exc}")
-
-
-@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
-def db_url(request, tmp_path) -> str:
-    """'' (SQLite in tmp_path) or the URL of a fresh PostgreSQL database."""
-    if request.param == "sqlite":
-        return ""
-    return pg_server.fresh_database(request.getfixturevalue("pg_admin_url"))
+from tests.pg_server import db_url, pg_admin_url  # noqa: F401 (fixtures)
 
 
 @pytest.fixture
-def db(db_url, tmp_path) -> Database:
+def db(db_url, tmp_path) -> Database:  # noqa: F811
     database = open_database(tmp_path, db_url)
     database.migrate()
     database.migrate()  # idempotent

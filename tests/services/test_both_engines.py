@@ -1,0 +1,57 @@
+"""The services end to end on each engine (SQLite, PostgreSQL: tests/pg_server.py): upload, worker,
+vocabulary rebuild, live index, search by vector, a second replica's index, delete."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.services import catalog, ingestion
+from app.services.context import open_context
+from app.services.live_index import LiveIndex
+from app.storage import jobs as jobs_repo
+from app.storage import models as models_repo
+from app.storage import vocabularies as vocab_repo
+from app.worker.runner import Worker
+from tests.conftest import make_settings
+from tests.pg_server import db_url, pg_admin_url  # noqa: F401 (fixtures)
+
+pytestmark = pytest.mark.slow
+N = 6
+
+
+def test_ingest_rebuild_search_delete(db_url, tmp_path, corpus):  # noqa: F811
+    ctx = open_context(make_settings(tmp_path / "d", database_url=db_url))
+    assert ctx.db.dialect == ("postgresql" if db_url else "sqlite")
+    subs = [ingestion.submit(ctx, p.read_bytes(), p.name, label=c) for p, c in corpus.seeded[:N]]
+    again = ingestion.submit(ctx, corpus.seeded[0][0].read_bytes(), "copy.obj")
+    assert not again.created and again.model.id == subs[0].model.id  # identical content: the same model
+    worker = Worker(ctx, "w")
+    while worker.run_once() is not None:
+        pass
+    with ctx.db.write() as conn:
+        rebuild = jobs_repo.enqueue(conn, "rebuild_vocabulary", payload={"size": 8})
+    assert worker.run_once().id == rebuild
+    with ctx.db.read() as conn:
+        assert models_repo.count_by_status(conn) == {"queued": 0, "ready": N, "failed": 0}
+        assert jobs_repo.get(conn, rebuild).state == "done"
+        vid = vocab_repo.active(conn).id
+        ids, vectors, _ = vocab_repo.vectors(conn, vid)
+    assert sorted(ids.tolist()) == sorted(s.model.id for s in subs)
+
+    live, replica = LiveIndex(ctx), LiveIndex(ctx)  # two API replicas over one database
+    live.refresh()
+    replica.refresh()
+    for i in range(N):  # each stored vector finds its own model first, identically on both replicas
+        dist, got, _ = live.search(vectors[i], 3)
+        assert got[0] == ids[i] and dist[0] == pytest.approx(0.0)
+        dist2, got2, _ = replica.search(vectors[i], 3)
+        np.testing.assert_array_equal(got, got2)
+        np.testing.assert_allclose(dist, dist2)
+
+    gone = subs[1].model.id
+    catalog.delete_model(ctx, live, gone)
+    assert gone not in live.pair.index.ids()
+    with ctx.db.read() as conn:
+        assert models_repo.get(conn, gone) is None and vocab_repo.vector_of(conn, gone, vid) is None
+    assert not ctx.blobs.mesh_path(subs[1].model.sha256, "obj").exists()
