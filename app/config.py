@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from importlib import resources
 from pathlib import Path
+from typing import Literal
 
 from pydantic import BaseModel, Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -57,6 +58,8 @@ class Settings(BaseSettings):
 
     data_dir: Path = Path("var/data")
     database_url: str = ""  # empty: SQLite in data_dir; postgresql://...: shared state there (docs/deploy.md)
+    # filesystem: meshes and descriptions under data_dir; database: in the database, data_dir caches them
+    blob_backend: Literal["filesystem", "database"] = "filesystem"
     host: str = "127.0.0.1"
     port: int = 8000
     workers: int = Field(default_factory=lambda: os.cpu_count() or 1, ge=0)  # embedded ingestion processes

@@ -66,7 +66,7 @@ def delete_model(ctx: ServiceContext, live: LiveIndex | None, model_id: int) -> 
             )
             if models_repo.get_by_sha256(conn, model.sha256) is None:  # no other model holds the content
                 home = ctx.blobs.mesh_path(model.sha256, model.file_type)
-                hidden = ctx.blobs.hide_mesh(model.sha256, model.file_type)
+                hidden = ctx.blobs.hide_mesh(model.sha256, model.file_type, conn)
     except BaseException:
         if hidden is not None and home is not None:  # rolled back: the row is there, so is its file
             os.replace(hidden, home)

@@ -8,6 +8,7 @@ from pathlib import Path
 from app.config import Settings
 from app.index import FILE_NAMES
 from app.storage.blobs import BlobStore
+from app.storage.blobs_db import DatabaseBlobStore
 from app.storage.db import Database
 from app.storage.engine import open_database
 
@@ -36,4 +37,5 @@ def open_context(settings: Settings) -> ServiceContext:
     data_dir.mkdir(parents=True, exist_ok=True)
     db = open_database(data_dir, settings.database_url)
     db.migrate()
-    return ServiceContext(settings=settings, db=db, blobs=BlobStore(data_dir))
+    blobs = DatabaseBlobStore(data_dir, db) if settings.blob_backend == "database" else BlobStore(data_dir)
+    return ServiceContext(settings=settings, db=db, blobs=blobs)

@@ -16,7 +16,7 @@ from app.services.vocabularies import load_vocabulary
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
 from app.storage import vocabularies as vocab_repo
-from app.storage.blobs import atomic_write, sha256_hex
+from app.storage.blobs import sha256_hex
 from app.storage.jobs import JobRecord
 from app.storage.models import ModelRecord
 
@@ -65,13 +65,13 @@ def submit(
         if existing is not None:  # a failed model: uploading its bytes again retries it
             if existing.file_type != file_type:  # same bytes, another extension: keep the model's file
                 ctx.blobs.mesh_path(digest, file_type).unlink(missing_ok=True)
-            ctx.blobs.ensure_mesh(data, digest, existing.file_type)
+            ctx.blobs.ensure_mesh(data, digest, existing.file_type, conn)
             models_repo.set_queued(conn, existing.id)
             job_id = jobs_repo.enqueue(conn, "ingest", model_id=existing.id)
             model = models_repo.get(conn, existing.id)
             assert model is not None
             return Submitted(model, job_id, False)
-        ctx.blobs.ensure_mesh(data, digest, file_type)
+        ctx.blobs.ensure_mesh(data, digest, file_type, conn)
         model_id = models_repo.insert(
             conn,
             name=name or Path(filename).stem,
@@ -105,8 +105,7 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
     timings["load"] = time.perf_counter() - t
     description = describe(mesh, ctx.settings.describe.params())
     timings.update({f"describe.{k}": v for k, v in description.seconds.items()})
-    desc_path = ctx.blobs.description_path(model.id)
-    atomic_write(desc_path, description.save)
+    ctx.blobs.put_description(model.id, description.save)
     for _ in range(5):  # encode with the active version; redo if a swap lands meanwhile
         t = time.perf_counter()
         with ctx.db.read() as conn:
@@ -121,7 +120,7 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
                 continue
             if models_repo.get(conn, model.id) is None:
                 jobs_repo.mark_done(conn, job.id, dict(timings, note="model deleted during ingestion"))
-                desc_path.unlink(missing_ok=True)
+                ctx.blobs.delete_model_files(model.id, conn=conn)  # the description, written after the delete
                 return timings
             if active is not None and vector is not None:
                 vocab_repo.put_vector(conn, model.id, active.id, vector)

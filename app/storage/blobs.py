@@ -11,6 +11,7 @@ import socket
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 
 def writer_tag() -> str:
@@ -68,18 +69,24 @@ class BlobStore:
     def thumbnail_path(self, model_id: int, size: int) -> Path:
         return self.root / "thumbnails" / f"{model_id}-{size}.png"
 
-    def ensure_mesh(self, data: bytes, sha256: str, file_type: str) -> Path:
+    def ensure_mesh(self, data: bytes, sha256: str, file_type: str, conn: Any = None) -> Path:
         """The mesh file of `data`, written again if a delete removed it meanwhile (call under the
-        database write lock: deletes remove mesh files under it, see hide_mesh)."""
+        database write lock: deletes remove mesh files under it, see hide_mesh). `conn`: that write
+        transaction (the database backend stores the mesh in it; unused here)."""
         path = self.mesh_path(sha256, file_type)
         if not path.is_file():
             atomic_write(path, data)
         return path
 
-    def hide_mesh(self, sha256: str, file_type: str) -> Path | None:
+    def put_description(self, model_id: int, write: Callable[[Path], None]) -> Path:
+        """Cache a model's description: `write(tmp_path)` writes it (ShapeDescription.save)."""
+        return atomic_write(self.description_path(model_id), write)
+
+    def hide_mesh(self, sha256: str, file_type: str, conn: Any = None) -> Path | None:
         """Move a mesh file aside (a temp name the start-up sweep removes if we die) and return where;
-        None if there was none. Called inside the delete's transaction; unlink it after the commit,
-        or put it back with os.replace if the transaction fails."""
+        None if there was none. Called inside the delete's transaction (`conn`: the database backend
+        deletes its copy in it); unlink it after the commit, or put it back with os.replace if the
+        transaction fails."""
         path = self.mesh_path(sha256, file_type)
         trash = path.with_name(f".{path.name}.{writer_tag()}.deleted.tmp")  # one delete at a time: the lock
         try:
@@ -88,9 +95,12 @@ class BlobStore:
             return None
         return trash
 
-    def delete_model_files(self, model_id: int, sha256: str | None = None, file_type: str = "") -> None:
+    def delete_model_files(
+        self, model_id: int, sha256: str | None = None, file_type: str = "", conn: Any = None
+    ) -> None:
         """Remove the description and cached thumbnails of one model, and its mesh when `sha256` is given
-        (content is shared by identity: the caller decides whether another model still needs it)."""
+        (content is shared by identity: the caller decides whether another model still needs it).
+        `conn`: the caller's write transaction, if inside one (the database backend deletes in it)."""
         if sha256 is not None:
             self.mesh_path(sha256, file_type).unlink(missing_ok=True)
         self.description_path(model_id).unlink(missing_ok=True)

@@ -73,6 +73,16 @@ MIGRATIONS: list[str] = [
         last_seen REAL NOT NULL
     );
     """,
+    # 2: blobs in the database (SHAPEBAG_BLOB_BACKEND=database; storage/blobs_db.py): the shared copy
+    # of meshes and descriptions when hosts share no filesystem
+    """
+    CREATE TABLE blobs (
+        key TEXT PRIMARY KEY,
+        data BLOB NOT NULL,
+        size_bytes INTEGER NOT NULL,
+        created_at TEXT NOT NULL
+    );
+    """,
 ]
 
 

@@ -55,3 +55,32 @@ def test_ingest_rebuild_search_delete(db_url, tmp_path, corpus):  # noqa: F811
     with ctx.db.read() as conn:
         assert models_repo.get(conn, gone) is None and vocab_repo.vector_of(conn, gone, vid) is None
     assert not ctx.blobs.mesh_path(subs[1].model.sha256, "obj").exists()
+
+
+def test_two_hosts_share_meshes_and_descriptions_through_the_database(db_url, tmp_path, corpus):  # noqa: F811
+    if not db_url:
+        pytest.skip("SQLite lives in one data directory: hosts without a shared filesystem need a server")
+    def host(name: str):  # its own data directory: a cache, shared with no one
+        return open_context(make_settings(tmp_path / name, database_url=db_url, blob_backend="database"))
+
+    api, worker_host = host("api"), host("worker")
+    subs = [ingestion.submit(api, p.read_bytes(), p.name, label=c) for p, c in corpus.seeded[:4]]
+    worker = Worker(worker_host, "remote")
+    while worker.run_once() is not None:  # reads each mesh from the database, stores its description there
+        pass
+    assert not (api.data_dir / "descriptions").exists()  # nothing came to the api host by a filesystem
+    with api.db.write() as conn:
+        rebuild = jobs_repo.enqueue(conn, "rebuild_vocabulary", payload={"size": 8})
+    Worker(api, "local").run_once()  # fits on descriptions fetched from the database
+    with api.db.read() as conn:
+        assert jobs_repo.get(conn, rebuild).state == "done"
+        assert models_repo.count_by_status(conn)["ready"] == 4
+        ids, vectors, _ = vocab_repo.vectors(conn, vocab_repo.active(conn).id)
+    live = LiveIndex(api)
+    live.refresh()
+    _, got, _ = live.search(vectors[0], 1)
+    assert got[0] == ids[0]
+    catalog.delete_model(api, live, subs[0].model.id)
+    fresh = host("new-host")
+    assert not fresh.blobs.mesh_path(subs[0].model.sha256, "obj").exists()  # gone from the database
+    assert fresh.blobs.mesh_path(subs[1].model.sha256, "obj").read_bytes() == corpus.seeded[1][0].read_bytes()

@@ -20,7 +20,8 @@ def _model(db) -> int:
 
 def test_schema_version_and_wal_mode(db):
     with db.read() as conn:
-        assert [r[0] for r in conn.execute("SELECT version FROM schema_migrations")] == [1]
+        versions = conn.execute("SELECT version FROM schema_migrations ORDER BY version").fetchall()
+        assert [r[0] for r in versions] == [1, 2]
         if db.dialect == "sqlite":
             assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
     assert db.ping()

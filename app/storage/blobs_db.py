@@ -1,0 +1,142 @@
+"""Blobs in the database (SHAPEBAG_BLOB_BACKEND=database): meshes and descriptions for hosts that share
+no filesystem. The `blobs` table (bytea on PostgreSQL) holds the copy every host reads; the data
+directory becomes a per-host cache that is filled on first use (paths stay what callers get, because
+the describe and render subprocesses read files).
+
+Guarantees kept from the filesystem store: a mesh enters and leaves the database in the same write
+transaction as the model row that needs it (ensure_mesh / hide_mesh take the caller's `conn`), so an
+upload and a delete of the same bytes stay linearisable and a rolled-back delete keeps its mesh; local
+files are still written temp -> fsync -> rename. Meshes are content-addressed, description keys carry the
+model id (never reused), so a cached file is never stale.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from app.storage.blobs import BlobStore, atomic_write, sha256_hex, writer_tag
+from app.storage.db import Database, utcnow
+
+# PostgreSQL's bytea holds up to 1 GB, and a value travels whole, in memory, on both sides: half of that
+MAX_BLOB_BYTES = 512 * 1024 * 1024
+
+
+class BlobTooLargeError(ValueError):
+    pass
+
+
+def mesh_key(sha256: str, file_type: str) -> str:
+    return f"meshes/{sha256}.{file_type}"
+
+
+def description_key(model_id: int) -> str:
+    return f"descriptions/{model_id}.npz"
+
+
+def store(conn: Any, key: str, data: bytes, replace: bool) -> None:
+    if len(data) > MAX_BLOB_BYTES:
+        raise BlobTooLargeError(f"{key}: {len(data)} bytes, over the database blob limit of {MAX_BLOB_BYTES}")
+    action = "UPDATE SET data = excluded.data, size_bytes = excluded.size_bytes" if replace else "NOTHING"
+    conn.execute(
+        "INSERT INTO blobs (key, data, size_bytes, created_at) VALUES (?, ?, ?, ?)"
+        f" ON CONFLICT(key) DO {action}",
+        (key, data, len(data), utcnow()),
+    )
+
+
+def load(conn: Any, key: str) -> bytes | None:
+    row = conn.execute("SELECT data FROM blobs WHERE key = ?", (key,)).fetchone()
+    return None if row is None else bytes(row[0])
+
+
+class DatabaseBlobStore(BlobStore):
+    """BlobStore's interface; the database holds the shared copy, `root` caches it on this host."""
+
+    def __init__(self, root: Path, db: Database) -> None:
+        super().__init__(root)
+        self.db = db
+
+    def _cached(self, path: Path, key: str) -> Path:
+        """`path`, fetched from the database first when this host has no copy (absent there too: the
+        path of a missing file, as the filesystem store would give)."""
+        if not path.is_file():
+            with self.db.read() as conn:
+                data = load(conn, key)
+            if data is not None:
+                atomic_write(path, data)
+        return path
+
+    def mesh_path(self, sha256: str, file_type: str) -> Path:
+        return self._cached(super().mesh_path(sha256, file_type), mesh_key(sha256, file_type))
+
+    def description_path(self, model_id: int) -> Path:
+        return self._cached(super().description_path(model_id), description_key(model_id))
+
+    def put_mesh(self, data: bytes, file_type: str) -> tuple[str, Path]:
+        # this host's copy only: the shared one is written by ensure_mesh, inside the model's transaction
+        digest = sha256_hex(data)
+        path = super().mesh_path(digest, file_type)
+        if not path.exists():
+            atomic_write(path, data)
+        return digest, path
+
+    def ensure_mesh(self, data: bytes, sha256: str, file_type: str, conn: Any = None) -> Path:
+        if conn is None:  # outside a caller's transaction: a short one of our own
+            with self.db.queue() as own:
+                store(own, mesh_key(sha256, file_type), data, replace=False)
+        else:
+            store(conn, mesh_key(sha256, file_type), data, replace=False)
+        path = super().mesh_path(sha256, file_type)
+        if not path.is_file():
+            atomic_write(path, data)
+        return path
+
+    def put_description(self, model_id: int, write: Callable[[Path], None]) -> Path:
+        path = atomic_write(super().description_path(model_id), write)
+        with self.db.queue() as conn:
+            store(conn, description_key(model_id), path.read_bytes(), replace=True)
+        return path
+
+    def hide_mesh(self, sha256: str, file_type: str, conn: Any = None) -> Path | None:
+        """Delete the shared copy in the caller's transaction (a rollback brings it back) and move this
+        host's copy aside as the filesystem store does."""
+        key = mesh_key(sha256, file_type)
+        if conn is None:
+            with self.db.queue() as own:
+                self._delete(own, [key])
+        else:
+            self._delete(conn, [key])
+        path = super().mesh_path(sha256, file_type)
+        trash = path.with_name(f".{path.name}.{writer_tag()}.deleted.tmp")
+        try:
+            os.replace(path, trash)
+        except FileNotFoundError:
+            return None
+        return trash
+
+    def delete_model_files(
+        self, model_id: int, sha256: str | None = None, file_type: str = "", conn: Any = None
+    ) -> None:
+        keys = [description_key(model_id)] + ([mesh_key(sha256, file_type)] if sha256 is not None else [])
+        if conn is None:
+            with self.db.queue() as own:
+                self._delete(own, keys)
+        else:  # inside the caller's write: a second transaction would wait on it (SQLite's one writer)
+            self._delete(conn, keys)
+        if sha256 is not None:
+            super().mesh_path(sha256, file_type).unlink(missing_ok=True)
+        super().description_path(model_id).unlink(missing_ok=True)
+        for thumb in (self.root / "thumbnails").glob(f"{model_id}-*.png"):
+            thumb.unlink(missing_ok=True)
+
+    @staticmethod
+    def _delete(conn: Any, keys: list[str]) -> None:
+        for key in keys:
+            conn.execute("DELETE FROM blobs WHERE key = ?", (key,))
+
+    def stored_keys(self) -> list[str]:
+        with self.db.read() as conn:
+            return [r[0] for r in conn.execute("SELECT key FROM blobs ORDER BY key")]
