@@ -33,7 +33,7 @@ def load_vocabulary(ctx: ServiceContext, record: VocabularyRecord) -> Vocabulary
     key = (str(ctx.data_dir), record.id)
     with _cache_lock:
         if key not in _cache:
-            _cache[key] = Vocabulary.load(inside_data_dir(ctx, record.path))
+            _cache[key] = Vocabulary.load(ctx.blobs.local_dir(inside_data_dir(ctx, record.path)))
         return _cache[key]
 
 
@@ -63,6 +63,7 @@ def register(ctx: ServiceContext, vocab: Vocabulary, activate: bool) -> int:
             log.warning("removing %s, left by an interrupted vocabulary rebuild", directory)
             shutil.rmtree(directory)
         vocab.save(directory)
+        ctx.blobs.share_dir(directory, conn)  # database blob backend: other hosts load it from there
         vocab_repo.set_path(conn, vid, str(directory.relative_to(ctx.data_dir)))
         if activate:
             vocab_repo.activate(conn, vid)
@@ -191,6 +192,7 @@ def remove_version_files(ctx: ServiceContext, vocabulary_ids: list[int]) -> None
     """Delete the directories of deleted versions (after the commit: a crash leaves files, not rows)."""
     for vid in vocabulary_ids:
         shutil.rmtree(ctx.vocabulary_dir(vid), ignore_errors=True)
+        ctx.blobs.forget_dir(ctx.vocabulary_dir(vid))
     if vocabulary_ids:
         log.info("pruned vocabulary versions %s", ", ".join(map(str, vocabulary_ids)))
 

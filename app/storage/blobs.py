@@ -82,6 +82,17 @@ class BlobStore:
         """Cache a model's description: `write(tmp_path)` writes it (ShapeDescription.save)."""
         return atomic_write(self.description_path(model_id), write)
 
+    def share_dir(self, directory: Path, conn: Any = None) -> None:
+        """Let other hosts read the files of `directory` (under root; a vocabulary version): on a
+        filesystem they already can. `conn`: the transaction that registers them."""
+
+    def local_dir(self, directory: Path) -> Path:
+        """`directory` with its shared files present on this host."""
+        return directory
+
+    def forget_dir(self, directory: Path) -> None:
+        """The shared copy of a deleted directory goes (the caller removes the local one)."""
+
     def hide_mesh(self, sha256: str, file_type: str, conn: Any = None) -> Path | None:
         """Move a mesh file aside (a temp name the start-up sweep removes if we die) and return where;
         None if there was none. Called inside the delete's transaction (`conn`: the database backend

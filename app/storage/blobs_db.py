@@ -24,6 +24,9 @@ from app.storage.db import Database, utcnow
 MAX_BLOB_BYTES = 512 * 1024 * 1024
 
 
+_UNDER = "SELECT key FROM blobs WHERE substr(key, 1, ?) = ? ORDER BY key"
+
+
 class BlobTooLargeError(ValueError):
     pass
 
@@ -131,6 +134,33 @@ class DatabaseBlobStore(BlobStore):
         super().description_path(model_id).unlink(missing_ok=True)
         for thumb in (self.root / "thumbnails").glob(f"{model_id}-*.png"):
             thumb.unlink(missing_ok=True)
+
+    def _prefix(self, directory: Path) -> str:
+        return directory.resolve().relative_to(self.root.resolve()).as_posix() + "/"
+
+    def share_dir(self, directory: Path, conn: Any = None) -> None:
+        files = [p for p in sorted(directory.rglob("*")) if p.is_file()]
+        prefix = self._prefix(directory)
+        if conn is None:
+            with self.db.queue() as own:
+                self.share_dir(directory, own)
+            return
+        for path in files:
+            key = prefix + path.relative_to(directory).as_posix()
+            store(conn, key, path.read_bytes(), replace=True)
+
+    def local_dir(self, directory: Path) -> Path:
+        prefix = self._prefix(directory)
+        with self.db.read() as conn:  # substr, not LIKE: '_' in a name is no wildcard
+            keys = [r[0] for r in conn.execute(_UNDER, (len(prefix), prefix))]
+        for key in keys:
+            self._cached(self.root / key, key)
+        return directory
+
+    def forget_dir(self, directory: Path) -> None:
+        prefix = self._prefix(directory)
+        with self.db.queue() as conn:
+            conn.execute("DELETE FROM blobs WHERE substr(key, 1, ?) = ?", (len(prefix), prefix))
 
     @staticmethod
     def _delete(conn: Any, keys: list[str]) -> None:

@@ -76,10 +76,20 @@ def test_two_hosts_share_meshes_and_descriptions_through_the_database(db_url, tm
         assert jobs_repo.get(conn, rebuild).state == "done"
         assert models_repo.count_by_status(conn)["ready"] == 4
         ids, vectors, _ = vocab_repo.vectors(conn, vocab_repo.active(conn).id)
-    live = LiveIndex(api)
+    late = ingestion.submit(api, corpus.held_out[0][0].read_bytes(), corpus.held_out[0][0].name)
+    assert worker.run_once().model_id == late.model.id  # encodes with the vocabulary the api host fitted
+    with api.db.read() as conn:
+        vid = vocab_repo.active(conn).id
+        assert models_repo.get(conn, late.model.id).status == "ready"
+        assert vocab_repo.vector_of(conn, late.model.id, vid) is not None
+    live, remote = LiveIndex(api), LiveIndex(worker_host)  # a replica on each host
     live.refresh()
-    _, got, _ = live.search(vectors[0], 1)
-    assert got[0] == ids[0]
+    remote.refresh()
+    for v in vectors:
+        dist, got, _ = live.search(v, 3)
+        dist2, got2, _ = remote.search(v, 3)
+        np.testing.assert_array_equal(got, got2)
+        np.testing.assert_allclose(dist, dist2)
     catalog.delete_model(api, live, subs[0].model.id)
     fresh = host("new-host")
     assert not fresh.blobs.mesh_path(subs[0].model.sha256, "obj").exists()  # gone from the database

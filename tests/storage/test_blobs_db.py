@@ -67,3 +67,27 @@ def test_delete_model_files_and_the_size_limit(db, hosts, monkeypatch):
     with pytest.raises(BlobTooLargeError, match="over the database blob limit"), db.write() as conn:
         a.ensure_mesh(MESH, digest, "obj", conn)
     assert a.stored_keys() == []
+
+
+def test_a_directory_shared_in_a_transaction_reaches_another_host(db, hosts):
+    a, b = hosts
+    version = a.root / "vocabularies" / "3"
+    (version / "sub").mkdir(parents=True)
+    (version / "words.npy").write_bytes(b"w")
+    (version / "sub" / "meta_1.json").write_bytes(b"{}")
+    with pytest.raises(RuntimeError), db.write() as conn:
+        a.share_dir(version, conn)
+        raise RuntimeError("the registration fails")
+    assert a.stored_keys() == []
+    other = a.root / "vocabularies" / "30"  # shares a name prefix, not the directory
+    other.mkdir()
+    (other / "words.npy").write_bytes(b"30")
+    with db.write() as conn:
+        a.share_dir(version, conn)
+        a.share_dir(other, conn)
+    there = b.local_dir(b.root / "vocabularies" / "3")
+    assert (there / "words.npy").read_bytes() == b"w"
+    assert (there / "sub" / "meta_1.json").read_bytes() == b"{}"
+    assert not (b.root / "vocabularies" / "30").exists()
+    a.forget_dir(version)
+    assert a.stored_keys() == ["vocabularies/30/words.npy"]
