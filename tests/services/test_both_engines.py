@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from fastapi.testclient import TestClient
 
+from app.main import create_app
 from app.services import catalog, ingestion
 from app.services.context import open_context
 from app.services.live_index import LiveIndex
@@ -13,7 +15,7 @@ from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
 from app.storage import vocabularies as vocab_repo
 from app.worker.runner import Worker
-from tests.conftest import make_settings
+from tests.conftest import make_settings, wait_for, wait_job
 from tests.pg_server import db_url, pg_admin_url  # noqa: F401 (fixtures)
 
 pytestmark = pytest.mark.slow
@@ -94,3 +96,26 @@ def test_two_hosts_share_meshes_and_descriptions_through_the_database(db_url, tm
     fresh = host("new-host")
     assert not fresh.blobs.mesh_path(subs[0].model.sha256, "obj").exists()  # gone from the database
     assert fresh.blobs.mesh_path(subs[1].model.sha256, "obj").read_bytes() == corpus.seeded[1][0].read_bytes()
+
+
+def test_the_api_with_its_embedded_worker(db_url, tmp_path, corpus):  # noqa: F811
+    backend = "database" if db_url else "filesystem"
+    settings = make_settings(
+        tmp_path / "d", database_url=db_url, blob_backend=backend, auto_vocabulary_min_models=4,
+        vocabulary_size=8,
+    )
+    with TestClient(create_app(settings)) as client:
+        posted = [
+            client.post("/models", files={"file": (p.name, p.read_bytes())}, data={"label": c})
+            for p, c in corpus.seeded[:4]
+        ]
+        jobs = [r.json()["job_id"] for r in posted]
+        assert all(wait_job(client, j)["state"] == "done" for j in jobs)
+        wait_for(lambda: client.get("/readyz").status_code == 200, timeout_s=60)
+        ready = client.get("/readyz").json()["checks"]
+        assert ready["database"] and ready["indexed_models"] == 4 and ready["workers_alive"] == 1
+        first = client.get("/models").json()["data"][0]["id"]
+        assert client.get(f"/models/{first}/similar").json()["count"] == 3
+        path, _ = corpus.held_out[0]
+        r = client.post("/search", files={"file": (path.name, path.read_bytes())}, data={"k": 2})
+        assert r.status_code == 200 and r.json()["count"] == 2
