@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 
 from app.cli import CommandError
+from app.core.hks import TIME_RANGES
+from app.core.smoothing import WEIGHTS
 from app.services.evaluation import (
     DEFAULT_CACHE,
     ROW_NAMES,
@@ -33,13 +35,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     scope = p.add_mutually_exclusive_group()
     scope.add_argument("--keypoints-only", action="store_true", help="BoF over the keypoints only")
     scope.add_argument("--all-vertices", action="store_true", help="BoF over every vertex (default)")
-    p.add_argument("--no-filter", action="store_true", help="keep every 2-ring HKS maximum as a keypoint")
+    p.add_argument("--area-weighted", action="store_true",
+                   help="each vertex counts by its area in the BoF (an integral over the surface)")
+    flt = p.add_mutually_exclusive_group()
+    flt.add_argument("--filter", dest="keypoint_filter", action="store_true", default=None,
+                     help="filter the keypoints by persistence and contrast"
+                     + (" (default)" if EvaluationOptions.keypoint_filter else ""))
+    flt.add_argument("--no-filter", dest="keypoint_filter", action="store_false",
+                     help="keep every 2-ring HKS maximum as a keypoint"
+                     + ("" if EvaluationOptions.keypoint_filter else " (default)"))
     p.add_argument("--target-vertices", type=int, default=EvaluationOptions.target_vertices,
                    help="canonical resolution of the eigen-solve (0 keeps the input resolution)")
     p.add_argument("--k", type=int, default=EvaluationOptions.k,
                    help="eigenpairs (default %(default)s, the paper's)")
+    p.add_argument("--time-range", choices=TIME_RANGES, default=EvaluationOptions.time_range,
+                   help="t_min from Weyl's law or from the computed λ_k (spectrum: the paper's; "
+                   "default %(default)s)")
     p.add_argument("--smoothing", type=int, default=EvaluationOptions.smoothing,
                    help="Taubin iterations before the eigen-solve (0: none; default %(default)s)")
+    p.add_argument("--smoothing-weights", choices=WEIGHTS, default=EvaluationOptions.smoothing_weights,
+                   help="Taubin weights: cotangent (intrinsic) or uniform (default %(default)s)")
     p.add_argument("--subdivision", choices=SUBDIVISIONS, default=EvaluationOptions.subdivision,
                    help="how coarse meshes are refined to the canonical resolution (default %(default)s)")
     p.add_argument("--vocabulary", type=Path, metavar="DIR",
@@ -48,6 +63,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="half: also fit a vocabulary on half of the classes and report the mAP shift")
     p.add_argument("--noise", type=float, default=0.0, metavar="NSR",
                    help="also query with noisy meshes (noise variance / coordinate variance, e.g. 0.01)")
+    p.add_argument("--queries", type=Path, metavar="QDIR",
+                   help="also query with the meshes of QDIR (labels.csv; same classes) against DIR; files "
+                   "named as in DIR are the same shapes and are left out of their own ranking")
+    p.add_argument("--fusion", default="", metavar="W[,W]",
+                   help="per BoF row, also a row fused with Shape-DNA at each weight W (e.g. 0.5,1)")
     p.add_argument("--seed", type=int, default=0, help="k-means and noise seed")
     p.add_argument("--seeds", type=int, default=1, metavar="N",
                    help="average BoF lines over N k-means seeds (seed, seed+1, ...) and show their spread")
@@ -74,19 +94,29 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--k must be at least 2")
     if args.smoothing < 0:
         raise CommandError("--smoothing must be >= 0")
+    try:
+        fusion = tuple(float(w) for w in args.fusion.split(",") if w.strip())
+    except ValueError as exc:
+        raise CommandError(f"--fusion takes comma-separated weights, not {args.fusion!r}") from exc
     options = EvaluationOptions(
         rows=rows,
         vocabulary_size=args.vocabulary_size,
         mode=args.mode,
         keypoints_only=args.keypoints_only,
-        keypoint_filter=not args.no_filter,
+        area_weighted=args.area_weighted,
+        keypoint_filter=(EvaluationOptions.keypoint_filter if args.keypoint_filter is None
+                         else args.keypoint_filter),
         target_vertices=args.target_vertices,
         k=args.k,
+        time_range=args.time_range,
         smoothing=args.smoothing,
+        smoothing_weights=args.smoothing_weights,
         subdivision=args.subdivision,
         vocabulary=args.vocabulary,
         fit_on=args.fit_on,
         noise=args.noise,
+        queries=args.queries,
+        fusion=fusion,
         seed=args.seed,
         seeds=args.seeds,
         per_class=args.per_class,

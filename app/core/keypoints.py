@@ -26,7 +26,10 @@ import scipy.sparse as sp
 
 @dataclass(frozen=True)
 class KeypointFilter:
-    enabled: bool = True
+    """Off by default: with the filter the vocabulary is fit on ~18 keypoints per shape instead of ~50,
+    and every dataset measured retrieved as well or better without it (docs/results.md)."""
+
+    enabled: bool = False
     min_persistence: float = 0.10
     min_contrast: float = 1e-3
     min_points: int = 4

@@ -5,7 +5,9 @@ for each row fits a vocabulary on the folder's keypoint descriptors, encodes eve
 L1 distance and scores with app.core.metrics. Baselines (Shape-DNA, D2) run in the same loop on the
 same shapes. Variant lines measure what a deployed service meets, each against its clean, fit-on-DIR
 line (Δ mAP): a frozen vocabulary (`vocabulary`), a vocabulary fit on half of the classes
-(`fit_on="half"`), and noisy queries against a clean database (`noise`, the paper's Fig. 3).
+(`fit_on="half"`), noisy queries against a clean database (`noise`, the paper's Fig. 3), and the
+meshes of another folder as queries (`queries`, e.g. another triangulation of every shape, see
+evaluation_sets). `fusion` weights add, per BoF row, a row fused with Shape-DNA (app.core.fusion).
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ from app.core.pipeline import DescribeParams, ShapeDescription
 from app.core.resolution import SUBDIVISIONS as SUBDIVISIONS  # the --subdivision choices
 from app.core.vocabulary import EncodeParams, Vocabulary, l1_distance
 from app.services import evaluation_cache as cache_mod
-from app.services.evaluation_report import RowResult
+from app.services import evaluation_sets as sets
+from app.services.evaluation_report import RowResult, mean_over_seeds
 
 PRESETS: tuple[str, ...] = ("paper",)  # run5 at the raw resolution, unsmoothed: as the paper computes it
 BASELINES: tuple[str, ...] = ("shape-dna", "d2")
@@ -43,14 +46,19 @@ class EvaluationOptions:
     vocabulary_size: int = 64
     mode: str = "hard"  # hard | soft
     keypoints_only: bool = False  # BoF over the keypoints instead of every vertex
-    keypoint_filter: bool = True
+    area_weighted: bool = False  # BoF as an integral over the surface (each vertex by its area)
+    keypoint_filter: bool = KeypointFilter.enabled
     target_vertices: int = DescribeParams.target_vertices
     k: int = DescribeParams.k  # eigenpairs
+    time_range: str = DescribeParams.time_range  # weyl | spectrum (the paper's t_min)
     smoothing: int = DescribeParams.smoothing  # Taubin iterations
+    smoothing_weights: str = DescribeParams.smoothing_weights  # cotangent (intrinsic) | uniform
     subdivision: str = DescribeParams.subdivision  # midpoint | loop
     vocabulary: Path | None = None  # frozen vocabulary directory: adds a "frozen" line per row
     fit_on: str = "all"  # all | half: "half" adds a line with a vocabulary fit on half the classes
     noise: float = 0.0  # > 0: adds a line with noisy queries against the clean database
+    queries: Path | None = None  # labelled folder: adds a line with its meshes as queries
+    fusion: tuple[float, ...] = ()  # Shape-DNA weights: adds a fused row per BoF row and weight
     seed: int = 0
     seeds: int = 1  # k-means seeds seed, seed+1, ...: BoF lines report the mean (and the spread)
     per_class: bool = False  # print where each clean BoF row loses (per-class mAP, first-tier intruders)
@@ -65,6 +73,7 @@ class Row:
     kind: str  # bof | shape-dna | d2
     describe: DescribeParams
     run: str = "run5"
+    fusion: float | None = None  # Shape-DNA weight of a fused BoF row
 
 
 @dataclass
@@ -83,21 +92,27 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
     if unknown:
         raise EvaluationError(f"unknown row(s) {', '.join(unknown)}; choose from {', '.join(ROW_NAMES)}")
     flt = KeypointFilter(enabled=options.keypoint_filter)
+    if any(w < 0 for w in options.fusion):
+        raise EvaluationError("--fusion weights must be >= 0")
     try:
         base = DescribeParams(
-            k=options.k, target_vertices=options.target_vertices, smoothing=options.smoothing,
-            subdivision=options.subdivision, keypoint_filter=flt,
+            k=options.k, target_vertices=options.target_vertices, time_range=options.time_range,
+            smoothing=options.smoothing,
+            smoothing_weights=options.smoothing_weights, subdivision=options.subdivision, keypoint_filter=flt,
         )
     except ValueError as exc:  # e.g. an unknown subdivision
         raise EvaluationError(str(exc)) from exc
     rows = []
     for name in options.rows:
         if name in RUNS:
-            rows.append(Row(name, "bof", base, name))
+            bof = [Row(name, "bof", base, name)]
         elif name == "paper":
-            rows.append(Row(name, "bof", replace(base, target_vertices=0, smoothing=0), "run5"))
+            paper = replace(base, target_vertices=0, smoothing=0, time_range="spectrum")
+            bof = [Row(name, "bof", paper, "run5")]
         else:
             rows.append(Row(name, name, base))
+            continue
+        rows += bof + [replace(bof[0], name=f"{name} + {w:g} DNA", fusion=w) for w in options.fusion]
     return rows
 
 
@@ -105,7 +120,9 @@ def evaluate(directory: str | Path, options: EvaluationOptions | None = None) ->
     """Describe, encode and score every shape of `directory` (labels.csv: file,class[,split])."""
     options = options or EvaluationOptions()
     start = time.perf_counter()
-    files, labels = _read_folder(directory)
+    database = _read_folder(directory)
+    files, labels = database.files, database.labels
+    query_set = _read_folder(options.queries) if options.queries is not None else None
     rows = build_rows(options)
     frozen = _load_frozen(options, rows)
     if options.fit_on not in ("all", "half"):
@@ -123,44 +140,60 @@ def evaluate(directory: str | Path, options: EvaluationOptions | None = None) ->
     variants = [clean] + ([noisy] if options.noise > 0 else [])
     want_d2 = any(r.kind == "d2" for r in rows)
     descs: dict[tuple[DescribeParams, cache_mod.Variant], list[ShapeDescription]] = {}
+    cross: dict[DescribeParams, list[ShapeDescription]] = {}  # the query folder's descriptions
     try:
         for params in dict.fromkeys(r.describe for r in rows):
             for variant in variants:
                 cache_mod.describe_all(files, params, cache, variant, want_d2, options.workers,
                                        options.progress, stats)
                 descs[params, variant] = cache_mod.load_descriptions(files, params, cache, variant)
+            if query_set is not None:
+                cache_mod.describe_all(query_set.files, params, cache, clean, False, options.workers,
+                                       options.progress, stats)
+                cross[params] = cache_mod.load_descriptions(query_set.files, params, cache, clean)
     except cache_mod.DescribeFailure as exc:
         raise EvaluationError(str(exc)) from exc
 
     result = EvaluationResult(str(directory), len(files), len(set(labels.tolist())), options)
     result.describe = _describe_summary(descs, stats)
+    fitted: dict[tuple, Vocabulary] = {}  # a fused row reuses its plain row's k-means vocabularies
     for row in rows:
         db = descs[row.describe, clean]
         queries = descs[row.describe, noisy] if options.noise > 0 else None
+        other = None
+        if query_set is not None and row.kind != "d2":  # D2 is not computed for the query folder
+            other = CrossSet(Path(query_set.root).name, cross[row.describe], query_set.labels,
+                             sets.counterparts(database, query_set))
         try:
             if row.kind == "bof":
-                result.rows += _bof_lines(row, db, queries, labels, options, frozen)
+                result.rows += _bof_lines(row, db, queries, labels, options, frozen, other, fitted)
             else:
                 d2 = {v: cache_mod.load_d2(files, cache, v) for v in variants} if row.kind == "d2" else {}
-                result.rows += _baseline_lines(row, db, queries, d2, labels, options)
+                result.rows += _baseline_lines(row, db, queries, d2, labels, options, other)
         except ValueError as exc:  # e.g. too few distinct descriptors for the vocabulary size
             raise EvaluationError(f"row {row.name}: {exc}") from exc
     result.seconds = time.perf_counter() - start
     return result
 
 
-def _read_folder(directory: str | Path) -> tuple[list[tuple[Path, str]], np.ndarray]:
-    from app.datasets.folder import DatasetError, read_labelled_folder
+@dataclass(frozen=True)
+class CrossSet:
+    """Another folder's descriptions as queries against the database (evaluation_sets)."""
 
+    name: str
+    descriptions: list[ShapeDescription]
+    labels: np.ndarray  # (q,)
+    pairs: np.ndarray  # (q,) database counterpart left out of each ranking, or all -1
+
+
+def _read_folder(directory: str | Path) -> sets.Folder:
     try:
-        entries = read_labelled_folder(directory)
-    except DatasetError as exc:
+        folder = sets.read_folder(directory)
+    except sets.FolderError as exc:
         raise EvaluationError(str(exc)) from exc
-    labels = np.array([e.label for e in entries])
-    if len(set(labels.tolist())) < 2:
-        raise EvaluationError("retrieval needs at least two classes in labels.csv")
-    files = [(e.path, cache_mod.content_sha256(e.path)) for e in entries]
-    return files, labels
+    if len(set(folder.labels.tolist())) < 2:
+        raise EvaluationError(f"retrieval needs at least two classes in {directory}/labels.csv")
+    return folder
 
 
 def _load_frozen(options: EvaluationOptions, rows: Sequence[Row]) -> Vocabulary | None:
@@ -181,20 +214,23 @@ def _load_frozen(options: EvaluationOptions, rows: Sequence[Row]) -> Vocabulary 
 
 def _bof_lines(
     row: Row, db: list[ShapeDescription], queries: list[ShapeDescription] | None, labels: np.ndarray,
-    options: EvaluationOptions, frozen: Vocabulary | None,
+    options: EvaluationOptions, frozen: Vocabulary | None, other: CrossSet | None = None,
+    fitted: dict[tuple, Vocabulary] | None = None,
 ) -> list[RowResult]:
     """The row's lines, each the mean over `options.seeds` k-means seeds (single-seed mAPs in details).
 
     k-means seeds alone move mAP by ~0.3 points on SHREC'11, so comparisons finer than that need seeds > 1.
     """
-    params = EncodeParams(mode=options.mode, keypoints_only=options.keypoints_only)
-    per_seed = [_bof_lines_one_seed(row, db, queries, labels, options, params, options.seed + i)
-                for i in range(options.seeds)]
-    lines = [_mean_over_seeds(same) for same in zip(*per_seed, strict=True)]
+    params = EncodeParams(mode=options.mode, keypoints_only=options.keypoints_only,
+                          area_weighted=options.area_weighted, fusion=row.fusion is not None)
+    fitted = {} if fitted is None else fitted
+    per_seed = [_bof_lines_one_seed(row, db, queries, labels, options, params, options.seed + i, other,
+                                    fitted) for i in range(options.seeds)]
+    lines = [mean_over_seeds(same) for same in zip(*per_seed, strict=True)]
     by_name = {line.name: line for line in lines}
     for line in lines:  # Δ mAP against the mean clean line, not against one seed's
         line.reference = by_name[line.reference.name] if line.reference is not None else None
-    if frozen is not None:  # one vocabulary, no seed
+    if frozen is not None and row.fusion is None:  # one vocabulary, no seed
         name = f"{row.name} [frozen {Path(options.vocabulary or '').name}]"
         lines.insert(1, _score_bof(name, row, frozen, db, db, labels, params, time.perf_counter(), lines[0]))
     return lines
@@ -202,75 +238,77 @@ def _bof_lines(
 
 def _bof_lines_one_seed(
     row: Row, db: list[ShapeDescription], queries: list[ShapeDescription] | None, labels: np.ndarray,
-    options: EvaluationOptions, params: EncodeParams, seed: int,
+    options: EvaluationOptions, params: EncodeParams, seed: int, other: CrossSet | None = None,
+    fitted: dict[tuple, Vocabulary] | None = None,
 ) -> list[RowResult]:
     meta = {"row": row.name}
     t0 = time.perf_counter()
-    vocab = Vocabulary.fit(db, size=options.vocabulary_size, run=row.run, seed=seed, metadata=meta)
+    vocab = _fit(db, row, options, params, seed, fitted, "all", meta)
     main = _score_bof(row.name, row, vocab, db, db, labels, params, t0)
     out = [main]
     if options.fit_on == "half":
         t1 = time.perf_counter()
         classes = sorted(set(labels.tolist()))[::2]  # every other class, in name order
         subset = [d for d, lab in zip(db, labels, strict=True) if lab in classes]
-        half = Vocabulary.fit(subset, size=options.vocabulary_size, run=row.run, seed=seed)
+        half = _fit(subset, row, options, params, seed, fitted, "half")
         name = f"{row.name} [fit on {len(classes)}/{len(set(labels.tolist()))} classes]"
         out.append(_score_bof(name, row, half, db, db, labels, params, t1, main))
     if queries is not None:
         name = f"{row.name} [noise {options.noise:g}]"
         out.append(_score_bof(name, row, vocab, db, queries, labels, params, time.perf_counter(), main))
+    if other is not None:
+        name = f"{row.name} [queries {other.name}]"
+        out.append(_score_bof(name, row, vocab, db, other.descriptions, labels, params, time.perf_counter(),
+                              main, other))
     return out
 
 
-def _mean_over_seeds(lines: Sequence[RowResult]) -> RowResult:
-    """One line from the same line under several seeds: mean scores, total seconds."""
-    first = lines[0]
-    if len(lines) == 1:
-        return first
-    scores = {m: float(np.mean([line.scores[m] for line in lines])) for m in first.scores}
-    maps = [line.scores["mAP"] for line in lines]
-    details = {**first.details, "seeds": len(lines), "mAP_per_seed": maps, "mAP_sd": float(np.std(maps)),
-               "per_class": _merge_breakdowns([line.details["per_class"] for line in lines])}
-    return RowResult(first.name, first.kind, scores, first.d, sum(line.seconds for line in lines),
-                     first.reference, details)
+def _fit(db: list[ShapeDescription], row: Row, options: EvaluationOptions, params: EncodeParams,
+         seed: int, fitted: dict[tuple, Vocabulary] | None, subset: str,
+         metadata: dict | None = None) -> Vocabulary:
+    """k-means vocabulary on `db` (memoised in `fitted` by describe parameters, run, seed and
+    subset); for a fused row, plus its fusion scales fit on the same shapes."""
+    key = (row.describe, row.run, seed, subset)
+    vocab = (fitted or {}).get(key)
+    if vocab is None:
+        vocab = Vocabulary.fit(db, size=options.vocabulary_size, run=row.run, seed=seed, metadata=metadata)
+        if fitted is not None:
+            fitted[key] = vocab
+    return vocab if row.fusion is None else vocab.with_fusion(db, params, weight=row.fusion)
 
 
 def _score_bof(
     name: str, row: Row, vocab: Vocabulary, db: list[ShapeDescription], queries: list[ShapeDescription],
     labels: np.ndarray, params: EncodeParams, t0: float, reference: RowResult | None = None,
+    other: CrossSet | None = None,
 ) -> RowResult:
-    """Encode database and queries with `vocab`; row i of the distances = query i vs the database."""
-    db_bof = np.stack([vocab.encode(d, params) for d in db])  # (N, v)
+    """Encode database and queries with `vocab`; row i of the distances = query i vs the database
+    (queries: the database's own shapes, noisy ones in its order, or `other`'s)."""
+    db_bof = np.stack([vocab.encode(d, params) for d in db])  # (N, v) or (N, v + c) fused
     q_bof = db_bof if queries is db else np.stack([vocab.encode(d, params) for d in queries])
-    distances = l1_distance(q_bof, db_bof)  # (N, N)
-    scores, per_class = metrics.scores_and_breakdown(distances, labels)
+    distances = l1_distance(q_bof, db_bof)  # (q, N)
+    if other is None:
+        scores, per_class = metrics.scores_and_breakdown(distances, labels)
+    else:
+        scores, per_class = sets.cross_scores(distances, other.labels, labels, other.pairs)
     return RowResult(name, "bof", scores, dimension(row.run), time.perf_counter() - t0, reference,
                      {"run": row.run, "vocabulary_size": vocab.size, "describe": row.describe.fingerprint(),
-                      "encode": asdict(params), "per_class": per_class})
-
-
-def _merge_breakdowns(breakdowns: Sequence[dict[str, dict]]) -> dict[str, dict]:
-    """Per-class mAP averaged over seeds; intruder counts summed over them."""
-    merged = {}
-    for cls in breakdowns[0]:
-        counts: dict[str, int] = {}
-        for b in breakdowns:
-            for other, n in b[cls]["intruders"].items():
-                counts[other] = counts.get(other, 0) + n
-        merged[cls] = {"mAP": float(np.mean([b[cls]["mAP"] for b in breakdowns])),
-                       "intruders": dict(sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))}
-    return merged
+                      "encode": asdict(params), "fusion": row.fusion,
+                      "vector_length": vocab.dimension(params), "per_class": per_class})
 
 
 def _baseline_lines(
     row: Row, db: list[ShapeDescription], queries: list[ShapeDescription] | None,
-    d2: dict, labels: np.ndarray, options: EvaluationOptions,
+    d2: dict, labels: np.ndarray, options: EvaluationOptions, other: CrossSet | None = None,
 ) -> list[RowResult]:
-    def score(name: str, q: np.ndarray, base: np.ndarray, t0: float, ref: RowResult | None) -> RowResult:
+    def score(name: str, q: np.ndarray, base: np.ndarray, t0: float, ref: RowResult | None,
+              cross: CrossSet | None = None) -> RowResult:
         dist = euclidean_distance(q, base) if row.kind == "shape-dna" else l1_distance(q, base)
         dim = SHAPE_DNA_COUNT if row.kind == "shape-dna" else D2_BINS
-        return RowResult(name, row.kind, metrics.retrieval_scores(dist, labels), dim,
-                         time.perf_counter() - t0, ref, {"describe": row.describe.fingerprint()})
+        scores = (metrics.retrieval_scores(dist, labels) if cross is None
+                  else sets.cross_scores(dist, cross.labels, labels, cross.pairs)[0])
+        return RowResult(name, row.kind, scores, dim, time.perf_counter() - t0, ref,
+                         {"describe": row.describe.fingerprint()})
 
     t0 = time.perf_counter()
     if row.kind == "shape-dna":  # eigenvalues of the unit-area canonical mesh: area = 1
@@ -283,6 +321,9 @@ def _baseline_lines(
     out = [main]
     if noisy is not None:
         out.append(score(f"{row.name} [noise {options.noise:g}]", noisy, base, time.perf_counter(), main))
+    if other is not None and row.kind == "shape-dna":
+        q = np.stack([shape_dna(d.eigenvalues) for d in other.descriptions])
+        out.append(score(f"{row.name} [queries {other.name}]", q, base, time.perf_counter(), main, other))
     return out
 
 

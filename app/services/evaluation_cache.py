@@ -53,24 +53,29 @@ class Variant:
         return "" if self.noise == 0 else f".noise{self.noise:g}-s{self.seed}"
 
 
-# the modules whose code decides a description or a D2 histogram: editing any of them (the method is
-# being tuned) must invalidate the cache, or an evaluation would silently report stale descriptions
-_DESCRIBE_CODE = ("mesh", "resolution", "laplacian", "spectrum", "hks", "keypoints", "pipeline")
-_D2_CODE = ("mesh", "resolution", "baselines")
+# the core modules that never decide a description (they encode, rank or score one); the code of every
+# other app/core module, sub-packages included, keys the cache: editing any of them (the method is
+# being tuned, a module is split in two) must invalidate it, or an evaluation would silently report
+# stale descriptions
+_NOT_DESCRIBE = ("vocabulary", "fusion", "descriptor", "metrics", "baselines")
+_NOT_D2 = ("vocabulary", "fusion", "descriptor", "metrics", "laplacian", "spectrum", "hks", "keypoints",
+           "pipeline", "smoothing")
 
 
-def code_fingerprint(modules: Sequence[str]) -> str:
-    """sha256 (16 hex) of the source of app/core/<module>.py for each module."""
+def code_fingerprint(exclude: Sequence[str] = ()) -> str:
+    """sha256 (16 hex) of the source of every app/core/**/*.py but the top-level modules `exclude`."""
     core = Path(__file__).resolve().parents[1] / "core"
     h = hashlib.sha256()
-    for name in modules:
-        h.update((core / f"{name}.py").read_bytes())
+    for path in sorted(core.rglob("*.py")):
+        if path.parent == core and path.stem in exclude:
+            continue
+        h.update(path.relative_to(core).as_posix().encode() + b"\0" + path.read_bytes())
     return h.hexdigest()[:16]
 
 
 # hashed at import, right after the core was imported: the code this process (and its forked
 # workers) runs, even if a file is edited while an evaluation is under way
-_FINGERPRINTS = {"describe": code_fingerprint(_DESCRIBE_CODE), "d2": code_fingerprint(_D2_CODE)}
+_FINGERPRINTS = {"describe": code_fingerprint(_NOT_DESCRIBE), "d2": code_fingerprint(_NOT_D2)}
 
 
 class DescriptionCache:

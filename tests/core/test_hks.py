@@ -13,9 +13,44 @@ from app.core.spectrum import Spectrum, smallest_eigenpairs
 
 def test_time_scales_span_eq_1_2_and_skip_the_zero_eigenvalues():
     lam = np.array([0.0, 0.0, 2.0, 3.0, 50.0])  # two components: λ2 is the first non-zero one
-    t = hks.time_scales(lam, m=100)
+    t = hks.time_scales(lam, m=100)  # the default: the paper's
     assert np.isclose(t[0], 4 * np.log(10) / 50.0) and np.isclose(t[-1], 4 * np.log(10) / 2.0)
     assert np.allclose(np.diff(np.log(t)), np.log(t[1] / t[0]))  # log-spaced
+
+
+def test_weyl_time_range_takes_lambda_k_from_the_area():
+    lam = np.array([0.0, 2.0, 3.0, 50.0])
+    t = hks.time_scales(lam, m=10, time_range="weyl")  # Weyl's λ_k = 4πk / A, unit area
+    assert np.isclose(t[0], 4 * np.log(10) / (4 * np.pi * 4)) and np.isclose(t[-1], 4 * np.log(10) / 2.0)
+    # λ_k ~ 1/A: on 4 times the area, t_min is 4 times larger
+    assert np.isclose(hks.time_scales(lam, m=10, time_range="weyl", area=4.0)[0], 4 * t[0])
+    import pytest
+
+    with pytest.raises(ValueError, match="time_range"):
+        hks.time_scales(lam, time_range="paper")
+
+
+def _unit_sphere_spectrum(vertices: np.ndarray, faces: np.ndarray, k: int) -> np.ndarray:
+    work = normalize_scale(Mesh(np.asarray(vertices, np.float64), np.asarray(faces, np.int64)))
+    L, M = cotangent_laplacian(work.vertices, work.faces)
+    return smallest_eigenpairs(L, M, k=k).eigenvalues
+
+
+def test_weyl_time_range_does_not_depend_on_the_triangulation():
+    import trimesh
+
+    # the same unit-area sphere, a regular icosphere and an irregular UV sphere, ~650 vertices each
+    ico = trimesh.creation.icosphere(subdivisions=3)
+    uv = trimesh.creation.uv_sphere(count=[24, 28])
+    a = _unit_sphere_spectrum(ico.vertices, ico.faces, 200)
+    b = _unit_sphere_spectrum(uv.vertices, uv.faces, 200)
+    weyl = [hks.time_scales(e, 20, time_range="weyl") for e in (a, b)]
+    paper = [hks.time_scales(e, 20, time_range="spectrum") for e in (a, b)]
+    # λ_2 (= 2/r² = 8π on the unit-area sphere) converges fast: t_max agrees within 1 % either way
+    assert np.isclose(a[1], 8 * np.pi, rtol=0.01) and np.isclose(b[1], 8 * np.pi, rtol=0.01)
+    # the top of the computed spectrum does not: the paper's t_min moves with the mesh, Weyl's does not
+    assert abs(paper[0][0] / paper[1][0] - 1) > 0.03
+    assert np.isclose(weyl[0][0], weyl[1][0], rtol=1e-12)
 
 
 def test_heat_kernel_matches_formula_on_a_hand_made_spectrum():

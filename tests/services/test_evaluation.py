@@ -189,11 +189,11 @@ def test_cache_keys_separate_parameters_variants_and_code(
 
     cache = evaluation_cache.DescriptionCache(tmp_path)
     clean, noisy = evaluation_cache.Variant(), evaluation_cache.Variant(0.01, 0)
-    p1, p2 = DescribeParams(), DescribeParams(keypoint_filter=KeypointFilter(enabled=False))
+    p1, p2 = DescribeParams(), DescribeParams(keypoint_filter=KeypointFilter(enabled=True))
     paths = {cache.description_path("ab", p, v) for p in (p1, p2) for v in (clean, noisy)}
     assert len(paths) == 4
     # an edit to the core code that computes descriptions must not reuse old entries
-    fingerprint = evaluation_cache.code_fingerprint(("mesh", "pipeline"))
+    fingerprint = evaluation_cache.code_fingerprint(exclude=("pipeline",))
     monkeypatch.setitem(evaluation_cache._FINGERPRINTS, "describe", fingerprint)
     assert evaluation_cache.DescriptionCache(tmp_path).description_path("ab", p1, clean) not in paths
 
@@ -234,3 +234,65 @@ def test_per_class_breakdown_is_in_the_json_and_printed_on_request(folder: Path,
     assert "classes below 99.5 % mAP" in table
     doc = json.loads(json.dumps(to_json(result)))
     assert set(doc["rows"][0]["details"]["per_class"]) == labels
+
+
+def test_queries_from_another_folder(folder: Path, tmp_path: Path) -> None:
+    from benchmarks.variants import generate
+
+    cache = tmp_path / "cache"
+    rows = ("run5", "shape-dna")
+    # the same files under the same names: each query is its database counterpart, left out of its
+    # ranking, so the line must equal the clean line exactly
+    same = tmp_path / "same"
+    shutil.copytree(folder, same)
+    result = evaluate(folder, _options(cache, rows=rows, queries=same))
+    names = [r.name for r in result.rows]
+    assert names == ["run5", "run5 [queries same]", "shape-dna", "shape-dna [queries same]"]
+    for main, cross in ((result.rows[0], result.rows[1]), (result.rows[2], result.rows[3])):
+        assert cross.reference is main and cross.scores == pytest.approx(main.scores)
+    # other names: nothing pairs, every query ranks the whole database and finds its twin first
+    renamed = tmp_path / "renamed"
+    renamed.mkdir()
+    lines = ["file,class"]
+    for i, line in enumerate((folder / "labels.csv").read_text().splitlines()[1:]):
+        name, cls = line.split(",")
+        shutil.copy(folder / name, renamed / f"q{i}.obj")
+        lines.append(f"q{i}.obj,{cls}")
+    (renamed / "labels.csv").write_text("\n".join(lines) + "\n")
+    unpaired = evaluate(folder, _options(cache, rows=rows, queries=renamed))
+    assert unpaired.rows[1].scores["NN"] == 1.0
+    # another triangulation of every shape (benchmarks/variants.py): described and scored as queries
+    remesh = generate(folder, tmp_path / "remesh", vertex_range=(300, 400))
+    cross = evaluate(folder, _options(cache, rows=("run5",), queries=remesh)).rows[1]
+    assert cross.name == "run5 [queries remesh]" and 0.0 <= cross.scores["mAP"] <= 1.0
+
+
+def test_cross_scores_on_a_hand_computed_ranking() -> None:
+    from app.services.evaluation_sets import cross_scores
+
+    labels = np.array(["a", "a", "b", "b"])
+    distances = np.array([[0.0, 3.0, 1.0, 2.0], [5.0, 4.0, 1.0, 0.0]])  # queries of classes a, b
+    query_labels = np.array(["a", "b"])
+    # unpaired: query 0 ranks 0(a) 2(b) 3(b) 1(a): AP = (1 + 2/4) / 2; query 1 ranks 3 2 1 0: AP = 1
+    scores, per_class = cross_scores(distances, query_labels, labels, np.array([-1, -1]))
+    assert scores["mAP"] == pytest.approx((0.75 + 1.0) / 2)
+    assert scores["NN"] == 1.0 and per_class["a"]["mAP"] == pytest.approx(0.75)
+    # paired with database shapes 0 and 3: those leave the rankings (0: 2 3 1 -> AP 1/3; 1: 2 1 0 -> AP 1)
+    scores, _ = cross_scores(distances, query_labels, labels, np.array([0, 3]))
+    assert scores["mAP"] == pytest.approx((1 / 3 + 1.0) / 2) and scores["NN"] == 0.5
+
+
+def test_fusion_rows(folder: Path, tmp_path: Path) -> None:
+    result = evaluate(folder, _options(tmp_path / "cache", rows=("run5",), fusion=(0.0, 1.0), noise=0.01))
+    names = [r.name for r in result.rows]
+    assert names == ["run5", "run5 [noise 0.01]", "run5 + 0 DNA", "run5 + 0 DNA [noise 0.01]",
+                     "run5 + 1 DNA", "run5 + 1 DNA [noise 0.01]"]
+    plain, zero, fused = result.rows[0], result.rows[2], result.rows[4]
+    # weight 0: the fused distance is the BoF distance over a constant, the same ranking
+    assert zero.scores == pytest.approx(plain.scores)
+    # d is the descriptor's (Run 5: 4); the vectors ranked are the words plus the Shape-DNA
+    assert zero.d == fused.d == plain.d == 4
+    assert fused.details["vector_length"] == plain.details["vector_length"] + 30 == 8 + 30
+    assert fused.details["fusion"] == 1.0 and plain.details["fusion"] is None
+    with pytest.raises(EvaluationError, match="fusion"):
+        evaluate(folder, _options(tmp_path / "cache", rows=("run5",), fusion=(-1.0,)))
