@@ -12,7 +12,7 @@ VOCAB_CLASSES   ?= 8
 VOCAB_PER_CLASS ?= 12
 
 .DEFAULT_GOAL := help
-.PHONY: help install run serve test test-fast test-scale postgres chromium lint format evaluate vocabulary bench docker-lint docker-test clean clean-demo clean-data
+.PHONY: help install run serve test test-fast test-scale postgres chromium lint format evaluate vocabulary bench docker-lint docker-test mutate clean clean-demo clean-data
 
 help:  ## list the commands
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) \
@@ -68,6 +68,18 @@ vocabulary: install  ## refit the shipped app/data/vocabulary/default (synthetic
 
 bench: install  ## short benchmark suite (prints tables, writes results/*.json)
 	$(BIN)/python -m benchmarks.run --short
+
+MUTATE          ?=
+MUTATE_CHILDREN ?= 1
+
+mutate: install  ## mutation testing (mutmut) of app/core + listed api/services/storage modules; score per module
+	@# MUTATE='app.storage.jobs* app.core.hks*' limits the run to those mutant names (default: all).
+	@# The tests find ../shared/datasets relative to their own path, one level deeper under mutants/:
+	@# a link shared -> ../shared lives only while mutmut runs.
+	@created=; if [ ! -e shared ]; then ln -s ../shared shared; created=1; fi; \
+	$(BIN)/mutmut run --max-children $(MUTATE_CHILDREN) $(MUTATE); rc=$$?; \
+	if [ -n "$$created" ]; then rm -f shared; fi; \
+	$(BIN)/python tools/mutation_report.py; exit $$rc
 
 docker-lint: install  ## hadolint the Dockerfile; `docker compose config -q` where compose v2 is installed
 	$(BIN)/hadolint Dockerfile && echo "Dockerfile: hadolint clean"
