@@ -1,0 +1,119 @@
+"""search.similar and the label filter, pinned where a mutation pass found them untested (issue 15):
+the stored model is left out of its own answer, an unknown or unindexed model is refused in words,
+a vocabulary swap is retried three times at most, and a label narrows the candidates to its models."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from app.services import search
+from app.services.context import open_context
+from app.services.errors import ConflictError, NotFoundError, NotReadyError
+from app.storage import models as models_repo
+
+VOCAB_ID = 7
+
+
+class FakeLive:
+    """A LiveIndex stand-in: answers every stored id by ascending distance, after `swaps` refusals."""
+
+    def __init__(self, ids: list[int], swaps: int = 0) -> None:
+        self.ids = np.asarray(ids, np.int64)
+        self.swaps = swaps
+        self.calls: list[tuple[int, object, int]] = []  # (k, allowed, vocabulary_id) per search
+        self.pair: SimpleNamespace | None = SimpleNamespace(record=SimpleNamespace(id=VOCAB_ID))
+
+    def require(self) -> SimpleNamespace:
+        assert self.pair is not None
+        return self.pair
+
+    def search(self, vector, k, allowed, vocabulary_id):
+        self.calls.append((k, allowed, vocabulary_id))
+        if self.swaps:
+            self.swaps -= 1
+            raise NotReadyError("the vocabulary changed; retry")
+        ids = self.ids if allowed is None else self.ids[np.isin(self.ids, allowed)]
+        ids = ids[:k]
+        return np.arange(len(ids), dtype=np.float32) / 2, ids, vocabulary_id
+
+
+@pytest.fixture
+def ctx(settings, monkeypatch):
+    """Five ready models (labels a, a, b, b, b) and one queued; every ready one has a vector."""
+    ctx = open_context(settings)
+    with ctx.db.write() as conn:
+        for i, label in enumerate(["a", "a", "b", "b", "b", "a"]):
+            mid = models_repo.insert(
+                conn,
+                name=f"m{i}",
+                label=label,
+                metadata={},
+                sha256=f"{i:064x}",
+                file_type="obj",
+                size_bytes=1,
+            )
+            if i < 5:
+                models_repo.set_ready(conn, mid, 10)
+
+    def vector_of(conn, model_id, vocabulary_id):
+        assert vocabulary_id == VOCAB_ID
+        return np.full(4, model_id, np.float32) if model_id <= 5 else None
+
+    monkeypatch.setattr(search.vocab_repo, "vector_of", vector_of)
+    return ctx
+
+
+def test_similar_leaves_the_model_out_and_ranks_from_one(ctx):
+    live = FakeLive([3, 1, 2, 4, 5])
+    result = search.similar(ctx, live, 3, k=2)  # type: ignore[arg-type]
+    assert [(h.model.id, h.rank) for h in result.hits] == [(1, 1), (2, 2)]
+    assert [h.distance for h in result.hits] == [0.5, 1.0]
+    assert result.vocabulary_id == VOCAB_ID
+    assert live.calls == [(3, None, VOCAB_ID)]  # k + 1: room for the model itself
+    assert set(result.seconds) == {"search"} and result.seconds["search"] >= 0
+
+
+def test_similar_refuses_unknown_and_unindexed_models(ctx):
+    with pytest.raises(NotFoundError, match="no model with id 99"):
+        search.similar(ctx, FakeLive([1]), 99, k=1)  # type: ignore[arg-type]
+    with pytest.raises(ConflictError, match="model 6 is queued, not indexed"):
+        search.similar(ctx, FakeLive([1]), 6, k=1)  # type: ignore[arg-type]
+
+
+def test_similar_retries_a_swap_then_gives_up(ctx):
+    live = FakeLive([1, 2, 3], swaps=2)
+    assert [h.model.id for h in search.similar(ctx, live, 1, k=2).hits] == [2, 3]  # type: ignore[arg-type]
+    assert len(live.calls) == 3
+    live = FakeLive([1, 2, 3], swaps=3)
+    with pytest.raises(NotReadyError, match="being swapped"):
+        search.similar(ctx, live, 1, k=2)  # type: ignore[arg-type]
+    assert len(live.calls) == 3
+
+
+def test_similar_without_a_vocabulary_raises_at_once(ctx):
+    live = FakeLive([1, 2], swaps=5)
+    live.require = lambda: live.pair  # type: ignore[method-assign]
+    original = live.search
+
+    def search_then_drop(*args, **kwargs):
+        live.pair = None  # the vocabulary went away during the search
+        return original(*args, **kwargs)
+
+    live.search = search_then_drop  # type: ignore[method-assign]
+    with pytest.raises(NotReadyError, match="changed"):
+        search.similar(ctx, live, 1, k=1)  # type: ignore[arg-type]
+    assert len(live.calls) == 1
+
+
+@pytest.mark.parametrize(("label", "expected"), [("a", [1, 2]), ("b", [3, 4, 5]), ("", None), (None, None)])
+def test_a_label_narrows_the_candidates_to_its_ready_models(ctx, label, expected):
+    live = FakeLive([1, 2, 3, 4, 5])
+    search.similar(ctx, live, 1, k=5, label=label)  # type: ignore[arg-type]
+    allowed = live.calls[0][1]
+    if expected is None:
+        assert allowed is None
+    else:
+        assert allowed.dtype == np.int64 and sorted(allowed.tolist()) == expected
