@@ -20,6 +20,7 @@ from app.index import IndexFileError, ShapeIndex, load_index, new_index
 from app.services.context import ServiceContext
 from app.services.errors import NotReadyError
 from app.services.vocabularies import encode_missing, load_vocabulary, reencode_version
+from app.storage import models as models_repo
 from app.storage import vocabularies as vocab_repo
 from app.storage.vocabularies import VocabularyRecord
 
@@ -46,6 +47,7 @@ class LiveIndex:
             set()
         )  # ids never come back (AUTOINCREMENT); a late poll must not re-add them
         self.last_saved = time.monotonic()
+        self._deletions_seen = 0  # deletions.seq: deletes served by other replicas reach this one too
 
     # --- loading and following the database ---------------------------------------------------------
 
@@ -88,6 +90,9 @@ class LiveIndex:
         with self._refresh_lock:
             with self.ctx.db.read() as conn:
                 record = vocab_repo.active(conn)
+                gone, self._deletions_seen = models_repo.deleted_since(conn, self._deletions_seen)
+            if gone:  # before the vectors: a model deleted after this read has no vectors left to add
+                self.remove(gone)
             if record is None:
                 return 0
             current = self.pair

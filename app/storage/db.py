@@ -83,6 +83,13 @@ MIGRATIONS: list[str] = [
         created_at TEXT NOT NULL
     );
     """,
+    # 3: deleted model ids in order, so every API replica's live index drops them (LiveIndex.refresh)
+    """
+    CREATE TABLE deletions (
+        seq INTEGER PRIMARY KEY AUTOINCREMENT,
+        model_id INTEGER NOT NULL
+    );
+    """,
 ]
 
 

@@ -142,7 +142,17 @@ def set_queued(conn: sqlite3.Connection, model_id: int) -> None:
 
 
 def delete(conn: sqlite3.Connection, model_id: int) -> None:
-    conn.execute("DELETE FROM models WHERE id = ?", (model_id,))
+    """Delete the row (its BoF vectors cascade) and log the id for other replicas (deleted_since)."""
+    if conn.execute("DELETE FROM models WHERE id = ?", (model_id,)).rowcount:
+        conn.execute("INSERT INTO deletions (model_id) VALUES (?)", (model_id,))
+
+
+def deleted_since(conn: sqlite3.Connection, after_seq: int) -> tuple[list[int], int]:
+    """Model ids deleted with seq > after_seq, and the highest seq seen (after_seq if none)."""
+    rows = conn.execute(
+        "SELECT seq, model_id FROM deletions WHERE seq > ? ORDER BY seq", (after_seq,)
+    ).fetchall()
+    return [int(r[1]) for r in rows], int(rows[-1][0]) if rows else after_seq
 
 
 def ids_with_label(conn: sqlite3.Connection, label: str) -> list[int]:

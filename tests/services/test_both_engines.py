@@ -52,8 +52,11 @@ def test_ingest_rebuild_search_delete(db_url, tmp_path, corpus):  # noqa: F811
         np.testing.assert_allclose(dist, dist2)
 
     gone = subs[1].model.id
-    catalog.delete_model(ctx, live, gone)
-    assert gone not in live.pair.index.ids()
+    catalog.delete_model(ctx, live, gone)  # served by one replica...
+    assert gone not in live.pair.index.ids() and gone in replica.pair.index.ids()
+    replica.refresh()  # ...the other drops it at its next poll
+    assert gone not in replica.pair.index.ids() and replica.pair.index.count == N - 1
+    np.testing.assert_array_equal(np.sort(live.pair.index.ids()), np.sort(replica.pair.index.ids()))
     with ctx.db.read() as conn:
         assert models_repo.get(conn, gone) is None and vocab_repo.vector_of(conn, gone, vid) is None
     assert not ctx.blobs.mesh_path(subs[1].model.sha256, "obj").exists()

@@ -113,10 +113,15 @@ def test_deletes_cascade_and_never_remove_the_active_version(db):
     with db.read() as conn:
         assert vocab_repo.vector_of(conn, m, old) is None  # its BoF went with it
         assert vocab_repo.vector_of(conn, m, new) is not None
+    with db.read() as conn:
+        _, seen = models_repo.deleted_since(conn, 0)
     with db.write() as conn:
         models_repo.delete(conn, m)
+        models_repo.delete(conn, m)  # already gone: not logged twice
     with db.read() as conn:
         assert vocab_repo.vectors(conn, new)[0].size == 0
+        ids, last = models_repo.deleted_since(conn, seen)
+        assert ids == [m] and last > seen and models_repo.deleted_since(conn, last) == ([], last)
 
 
 def test_heartbeats_and_live_workers(db):
