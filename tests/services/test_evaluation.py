@@ -296,3 +296,34 @@ def test_fusion_rows(folder: Path, tmp_path: Path) -> None:
     assert fused.details["fusion"] == 1.0 and plain.details["fusion"] is None
     with pytest.raises(EvaluationError, match="fusion"):
         evaluate(folder, _options(tmp_path / "cache", rows=("run5",), fusion=(-1.0,)))
+
+
+def test_command_passes_the_new_flags(folder: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from app.commands import evaluate as command
+    from app.core.keypoints import KeypointFilter
+
+    seen: list[EvaluationOptions] = []
+
+    def fake(directory: Path, options: EvaluationOptions) -> None:
+        seen.append(options)
+        raise EvaluationError("stop here")
+
+    monkeypatch.setattr(command, "evaluate", fake)
+    parser = argparse.ArgumentParser()
+    command.register(parser.add_subparsers())
+    args = parser.parse_args(["evaluate", str(folder), "--queries", str(tmp_path), "--fusion", "0.5, 1",
+                              "--filter", "--time-range", "weyl", "--smoothing-weights", "cotangent",
+                              "--area-weighted"])
+    with pytest.raises(CommandError, match="stop here"):
+        args.func(args)
+    opts = seen[0]
+    assert opts.queries == tmp_path and opts.fusion == (0.5, 1.0) and opts.keypoint_filter
+    assert (opts.time_range, opts.smoothing_weights, opts.area_weighted) == ("weyl", "cotangent", True)
+    # without --filter/--no-filter the default is DescribeParams'
+    plain = parser.parse_args(["evaluate", str(folder)])
+    with pytest.raises(CommandError):
+        plain.func(plain)
+    assert seen[1].keypoint_filter == KeypointFilter().enabled is False
+    bad = parser.parse_args(["evaluate", str(folder), "--fusion", "heavy"])
+    with pytest.raises(CommandError, match="--fusion"):
+        bad.func(bad)
