@@ -54,9 +54,12 @@ def measure(classes: int = 6, per_class: int = 8, seed: int = 0) -> dict[str, fl
 @pytest.mark.slow
 def test_hks_bof_separates_the_body_plans() -> None:
     figures = measure(classes=6, per_class=4)
-    # chance: NN ~ 3/23 = 0.13 and mAP ~ 0.17; a retrieval that sees the body plans does far better
-    assert figures["nn"] >= 0.8, figures
-    assert figures["map"] >= 0.6, figures
+    # chance: NN ~ 3/23 = 0.13 and mAP ~ 0.17. Measured at 64d3fbe (defaults of issue 11): NN 1.0,
+    # mAP 0.972 on this corpus (seed 0); 0.955 and 0.955 on seeds 1 and 2 (NN 1.0). The margins: one
+    # wrong nearest neighbour of 24 (0.958), and mAP 0.04 below the measure, twice the spread between
+    # corpora, so a change to the HKS or the BoF that costs retrieval fails here.
+    assert figures["nn"] >= 0.95, figures
+    assert figures["map"] >= 0.93, figures
 
 
 if __name__ == "__main__":
