@@ -16,6 +16,7 @@ import tempfile
 import time
 from contextlib import ExitStack
 from pathlib import Path
+from typing import Any
 
 from app.storage import jobs as jobs_repo
 from app.storage.engine import open_database
@@ -24,7 +25,7 @@ from benchmarks.common import machine, table, write_json
 CTX = multiprocessing.get_context("spawn")
 
 
-def _claimer(url: str, data_dir: str, name: str, barrier, done) -> None:  # type: ignore[no-untyped-def]
+def _claimer(url: str, data_dir: str, name: str, barrier: Any, done: Any) -> None:
     db = open_database(Path(data_dir), url)
     barrier.wait()
     n = 0
