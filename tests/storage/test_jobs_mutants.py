@@ -1,0 +1,81 @@
+"""Job-queue functions the mutation pass found untested by the fast suite (issue 15): the latest job
+of a model, a failure's record, a release for retry, and the live-worker count at its time boundary.
+On SQLite and PostgreSQL through tests/storage/conftest.py's `db`."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+from app.storage import jobs as jobs_repo
+from app.storage import models as models_repo
+
+
+def _model(db, n: int) -> int:
+    with db.write() as conn:
+        return models_repo.insert(
+            conn, name=f"m{n}", label=None, metadata={}, sha256=f"{n:064x}", file_type="obj", size_bytes=1
+        )
+
+
+def test_latest_for_model_is_its_newest_job_only(db):
+    a, b, c = _model(db, 1), _model(db, 2), _model(db, 3)
+    with db.write() as conn:
+        first = jobs_repo.enqueue(conn, "ingest", model_id=a)
+        other = jobs_repo.enqueue(conn, "ingest", model_id=b)
+        second = jobs_repo.enqueue(conn, "ingest", model_id=a, payload={"again": True})
+    with db.read() as conn:
+        latest = jobs_repo.latest_for_model(conn, a)
+        assert latest is not None and latest.id == second and latest.payload == {"again": True}
+        assert jobs_repo.latest_for_model(conn, b).id == other  # type: ignore[union-attr]
+        assert jobs_repo.latest_for_model(conn, c) is None
+    assert first < other < second
+
+
+def test_mark_failed_records_the_error_and_keeps_or_replaces_timings(db):
+    with db.write() as conn:
+        kept, replaced = jobs_repo.enqueue(conn, "ingest"), jobs_repo.enqueue(conn, "ingest")
+    for _ in range(2):
+        assert jobs_repo.claim(db, "w", lease_seconds=60, max_attempts=3) is not None
+    with db.write() as conn:
+        jobs_repo.mark_done(conn, kept, {"load": 1.5})  # timings written first
+        jobs_repo.mark_failed(conn, kept, "boom")
+        jobs_repo.mark_failed(conn, replaced, "bad mesh", {"load": 0.25})
+    with db.read() as conn:
+        k, r = jobs_repo.get(conn, kept), jobs_repo.get(conn, replaced)
+    assert (k.state, k.error, k.timings, k.lease_until) == ("failed", "boom", {"load": 1.5}, None)
+    assert (r.state, r.error, r.timings, r.lease_until) == ("failed", "bad mesh", {"load": 0.25}, None)
+
+
+def test_release_for_retry_requeues_with_the_error_and_no_owner(db):
+    with db.write() as conn:
+        job_id = jobs_repo.enqueue(conn, "ingest")
+    assert jobs_repo.claim(db, "w1", lease_seconds=60, max_attempts=3).worker == "w1"  # type: ignore[union-attr]
+    with db.write() as conn:
+        jobs_repo.release_for_retry(conn, job_id, "transient: disk full")
+        again = jobs_repo.get(conn, job_id)
+        assert jobs_repo.queue_depth(conn) == {"queued": 1, "running": 0}
+    assert again is not None
+    assert (again.state, again.error, again.worker, again.lease_until) == (
+        "queued",
+        "transient: disk full",
+        None,
+        None,
+    )
+    retried = jobs_repo.claim(db, "w2", lease_seconds=60, max_attempts=3)
+    assert retried is not None and retried.id == job_id and retried.attempts == 2 and retried.worker == "w2"
+
+
+def test_live_workers_counts_heartbeats_within_the_window_inclusive(db, monkeypatch):
+    clock = {"now": 1_000_000.0}
+    monkeypatch.setattr(jobs_repo, "time", SimpleNamespace(time=lambda: clock["now"]))
+    jobs_repo.heartbeat(db, "old", 1)
+    clock["now"] += 5.0
+    jobs_repo.heartbeat(db, "new", 2)
+    clock["now"] += 10.0  # old: 15 s ago, new: 10 s ago
+    with db.read() as conn:
+        assert jobs_repo.live_workers(conn, within_s=9.5) == 0
+        assert jobs_repo.live_workers(conn, within_s=10.0) == 1  # exactly at the edge still counts
+        assert jobs_repo.live_workers(conn, within_s=15.0) == 2
+    jobs_repo.forget_worker(db, "new")
+    with db.read() as conn:
+        assert jobs_repo.live_workers(conn, within_s=60.0) == 1
