@@ -58,7 +58,8 @@ def settings_from(
     values = {k: v for k, v in overrides.items() if v is not None}
     if hasattr(args, "data_dir"):
         data_dir, source = resolve_data_dir(args.data_dir, default_data_dir, use_env)
-        if must_exist and not (data_dir / DATABASE_FILE).is_file():
+        on_server = bool(os.environ.get("SHAPEBAG_DATABASE_URL"))  # PostgreSQL: the data dir is only a cache
+        if must_exist and not on_server and not (data_dir / DATABASE_FILE).is_file():
             raise CommandError(
                 f"no shapebag data in {data_dir} ({source}): pass --data-dir or set SHAPEBAG_DATA_DIR to the "
                 f"directory the server or `shapebag ingest` uses"

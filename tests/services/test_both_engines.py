@@ -62,6 +62,19 @@ def test_ingest_rebuild_search_delete(db_url, tmp_path, corpus):  # noqa: F811
     assert not ctx.blobs.mesh_path(subs[1].model.sha256, "obj").exists()
 
 
+def test_read_only_commands_find_the_database(db_url, tmp_path, corpus, monkeypatch, capsys):  # noqa: F811
+    from app import cli
+
+    data_dir = tmp_path / ("cache" if db_url else "d")  # on PostgreSQL: a data dir holding no database
+    ctx = open_context(make_settings(tmp_path / "d", database_url=db_url))
+    with ctx.db.write() as conn:
+        vocab_repo.insert(conn, path="vocabularies/1", trained_on=5, size=8, run="run5", metadata={})
+    if db_url:
+        monkeypatch.setenv("SHAPEBAG_DATABASE_URL", db_url)
+    assert cli.main(["vocabulary", "show", "--data-dir", str(data_dir)]) == 0
+    assert "v1: 8 words, run5, trained on 5 descriptors" in capsys.readouterr().out
+
+
 def test_two_hosts_share_meshes_and_descriptions_through_the_database(db_url, tmp_path, corpus):  # noqa: F811
     if not db_url:
         pytest.skip("SQLite lives in one data directory: hosts without a shared filesystem need a server")
