@@ -113,10 +113,9 @@ class PostgresDatabase(Database):
 
     def _connect(self) -> psycopg.Connection[Any]:
         # autocommit: a transaction is explicit (conn.transaction()), reads see each statement's snapshot
-        conn = psycopg.connect(self.url, autocommit=True, row_factory=_row_factory)
-        # a lock wait as bounded as SQLite's busy timeout, instead of forever
-        conn.execute(f"SET lock_timeout = {int(self.busy_timeout_s * 1000)}")
-        return conn
+        # lock waits bounded like SQLite's busy timeout, instead of forever (set at connect: no round trip)
+        options = f"-c lock_timeout={int(self.busy_timeout_s * 1000)}"
+        return psycopg.connect(self.url, autocommit=True, row_factory=_row_factory, options=options)
 
     @contextmanager
     def read(self) -> Iterator[sqlite3.Connection]:

@@ -156,3 +156,15 @@ def test_job_outcomes_and_timings(db):
         assert done.timings == {"load": 0.5, "describe.spectrum": 1.25} and done.attempts == 2
     with pytest.raises(ValueError), db.write() as conn:
         jobs_repo.enqueue(conn, "no-such-kind")
+
+
+def test_a_write_waits_for_another_only_up_to_the_busy_timeout(db, db_url, tmp_path):
+    # the holder keeps its transaction open until the waiter has given up: no race on timing
+    impatient = type(db)(db_url or tmp_path / "shapebag.db", busy_timeout_s=0.2)
+    with db.write() as conn:
+        _model(conn, "held")
+        with pytest.raises(Exception, match="(?i)lock"), impatient.write() as other:
+            _model(other, "waiting")
+    with db.read() as conn:
+        assert models_repo.get_by_sha256(conn, "waiting") is None
+        assert models_repo.get_by_sha256(conn, "held") is not None
