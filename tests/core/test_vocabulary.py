@@ -94,3 +94,16 @@ def test_save_load_round_trip_without_pickle(tmp_path):
     np.save(path / "centers.npy", np.array([object()], dtype=object), allow_pickle=True)
     with pytest.raises(ValueError):
         Vocabulary.load(path)
+
+
+def test_the_shipped_vocabulary_is_fit_for_the_describe_defaults_and_fused():
+    """A change of describe defaults without `make vocabulary` would ship words from another p(x) space."""
+    from importlib import resources
+
+    from app.core.pipeline import DescribeParams
+
+    vocab = Vocabulary.load(str(resources.files("app") / "data" / "vocabulary" / "default"))
+    assert vocab.metadata["describe"] == DescribeParams().fingerprint(), "refit it: make vocabulary"
+    assert vocab.size == 64 and vocab.run == "run5"
+    assert vocab.fusion is not None and vocab.dimension() == 64 + vocab.fusion.count
+    assert vocab.dimension(EncodeParams(fusion=False)) == 64

@@ -83,4 +83,4 @@ def test_the_wheel_serves_the_shipped_vocabulary_on_an_empty_data_dir(venv_pytho
     assert vocab["id"] == 1 and vocab["words"] == shipped["size"] and vocab["indexed_models"] == 0
     meta = vocab["metadata"]
     assert meta["created_at"] == shipped["created_at"] and meta["source"] == shipped["source"]
-    assert meta.get("fusion") == shipped.get("fusion")  # fused where the shipped one has scales
+    assert meta["fusion"] == shipped["fusion"]  # served fused, with the scales fixed at vocabulary time
