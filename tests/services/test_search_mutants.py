@@ -117,3 +117,44 @@ def test_a_label_narrows_the_candidates_to_its_ready_models(ctx, label, expected
         assert allowed is None
     else:
         assert allowed.dtype == np.int64 and sorted(allowed.tolist()) == expected
+
+
+class EncodingLive(FakeLive):
+    """FakeLive that also encodes: records the description, returns a vector naming it."""
+
+    def __init__(self, ids: list[int]) -> None:
+        super().__init__(ids)
+        self.described: list[object] = []
+        self.vectors: list[np.ndarray] = []
+
+    def encode(self, description):
+        self.described.append(description)
+        return VOCAB_ID, np.full(4, 42.0, np.float32)
+
+    def search(self, vector, k, allowed, vocabulary_id):
+        self.vectors.append(vector)
+        return super().search(vector, k, allowed, vocabulary_id)
+
+
+def test_search_description_passes_query_k_and_label_through(ctx):
+    live = EncodingLive([1, 2, 3, 4, 5])
+    query = object()
+    result = search.search_description(ctx, live, query, k=2, label="b")  # type: ignore[arg-type]
+    assert live.described == [query]
+    assert live.vectors[0].tolist() == [42.0] * 4
+    k, allowed, vid = live.calls[0]
+    assert k == 2 and sorted(allowed.tolist()) == [3, 4, 5] and vid == VOCAB_ID
+    assert [h.model.id for h in result.hits] == [3, 4]
+
+
+def test_search_description_times_encode_and_search_apart(ctx, monkeypatch):
+    ticks = iter([10.0, 11.5, 20.0, 20.25])
+    monkeypatch.setattr(search, "time", SimpleNamespace(perf_counter=lambda: next(ticks)))
+    result = search.search_description(ctx, EncodingLive([1]), object(), k=1)  # type: ignore[arg-type]
+    assert result.seconds == {"encode": 1.5, "search": 0.25}
+
+
+def test_similar_times_the_whole_answer(ctx, monkeypatch):
+    ticks = iter([5.0, 7.5])
+    monkeypatch.setattr(search, "time", SimpleNamespace(perf_counter=lambda: next(ticks)))
+    assert search.similar(ctx, FakeLive([1, 2]), 1, k=1).seconds == {"search": 2.5}  # type: ignore[arg-type]
