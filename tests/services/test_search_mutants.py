@@ -24,6 +24,7 @@ class FakeLive:
         self.ids = np.asarray(ids, np.int64)
         self.swaps = swaps
         self.calls: list[tuple[int, object, int]] = []  # (k, allowed, vocabulary_id) per search
+        self.vectors: list[np.ndarray] = []
         self.pair: SimpleNamespace | None = SimpleNamespace(record=SimpleNamespace(id=VOCAB_ID))
 
     def require(self) -> SimpleNamespace:
@@ -32,6 +33,7 @@ class FakeLive:
 
     def search(self, vector, k, allowed, vocabulary_id):
         self.calls.append((k, allowed, vocabulary_id))
+        self.vectors.append(vector)
         if self.swaps:
             self.swaps -= 1
             raise NotReadyError("the vocabulary changed; retry")
@@ -59,7 +61,7 @@ def ctx(settings, monkeypatch):
                 models_repo.set_ready(conn, mid, 10)
 
     def vector_of(conn, model_id, vocabulary_id):
-        assert vocabulary_id == VOCAB_ID
+        assert vocabulary_id == VOCAB_ID and conn is not None
         return np.full(4, model_id, np.float32) if model_id <= 5 else None
 
     monkeypatch.setattr(search.vocab_repo, "vector_of", vector_of)
@@ -73,6 +75,7 @@ def test_similar_leaves_the_model_out_and_ranks_from_one(ctx):
     assert [h.distance for h in result.hits] == [0.5, 1.0]
     assert result.vocabulary_id == VOCAB_ID
     assert live.calls == [(3, None, VOCAB_ID)]  # k + 1: room for the model itself
+    assert live.vectors[0].tolist() == [3.0] * 4  # the stored model's own vector
     assert set(result.seconds) == {"search"} and result.seconds["search"] >= 0
 
 
@@ -88,7 +91,7 @@ def test_similar_retries_a_swap_then_gives_up(ctx):
     assert [h.model.id for h in search.similar(ctx, live, 1, k=2).hits] == [2, 3]  # type: ignore[arg-type]
     assert len(live.calls) == 3
     live = FakeLive([1, 2, 3], swaps=3)
-    with pytest.raises(NotReadyError, match="being swapped"):
+    with pytest.raises(NotReadyError, match=r"^the vocabulary is being swapped; retry$"):
         search.similar(ctx, live, 1, k=2)  # type: ignore[arg-type]
     assert len(live.calls) == 3
 
@@ -125,15 +128,10 @@ class EncodingLive(FakeLive):
     def __init__(self, ids: list[int]) -> None:
         super().__init__(ids)
         self.described: list[object] = []
-        self.vectors: list[np.ndarray] = []
 
     def encode(self, description):
         self.described.append(description)
         return VOCAB_ID, np.full(4, 42.0, np.float32)
-
-    def search(self, vector, k, allowed, vocabulary_id):
-        self.vectors.append(vector)
-        return super().search(vector, k, allowed, vocabulary_id)
 
 
 def test_search_description_passes_query_k_and_label_through(ctx):
@@ -158,3 +156,11 @@ def test_similar_times_the_whole_answer(ctx, monkeypatch):
     ticks = iter([5.0, 7.5])
     monkeypatch.setattr(search, "time", SimpleNamespace(perf_counter=lambda: next(ticks)))
     assert search.similar(ctx, FakeLive([1, 2]), 1, k=1).seconds == {"search": 2.5}  # type: ignore[arg-type]
+
+
+def test_search_description_gives_up_after_three_swaps_in_words(ctx):
+    live = EncodingLive([1])
+    live.swaps = 3
+    with pytest.raises(NotReadyError, match=r"^the vocabulary is being swapped; retry$"):
+        search.search_description(ctx, live, object(), k=1)  # type: ignore[arg-type]
+    assert len(live.calls) == 3
