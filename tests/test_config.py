@@ -1,0 +1,31 @@
+"""Every describe parameter the harness measures can be set from the environment, and is checked there."""
+
+from __future__ import annotations
+
+import pydantic
+import pytest
+
+from app.config import Settings
+from app.core.pipeline import DescribeParams
+
+
+def test_describe_defaults_are_the_core_defaults(monkeypatch):
+    for name in ("SMOOTHING", "SMOOTHING_WEIGHTS", "TIME_RANGE"):
+        monkeypatch.delenv(f"SHAPEBAG_DESCRIBE__{name}", raising=False)
+    params = Settings().describe.params()
+    assert params == DescribeParams()
+
+
+def test_smoothing_weights_and_time_range_reach_the_core(monkeypatch):
+    monkeypatch.setenv("SHAPEBAG_DESCRIBE__SMOOTHING_WEIGHTS", "cotangent")
+    monkeypatch.setenv("SHAPEBAG_DESCRIBE__TIME_RANGE", "weyl")
+    params = Settings().describe.params()
+    assert params.smoothing_weights == "cotangent" and params.time_range == "weyl"
+    assert params.fingerprint() != DescribeParams().fingerprint()  # cached descriptions are not reused
+
+
+@pytest.mark.parametrize("name", ["SMOOTHING_WEIGHTS", "TIME_RANGE"])
+def test_unknown_values_are_refused_at_start(monkeypatch, name):
+    monkeypatch.setenv(f"SHAPEBAG_DESCRIBE__{name}", "bogus")
+    with pytest.raises(pydantic.ValidationError):
+        Settings()
