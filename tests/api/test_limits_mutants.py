@@ -249,3 +249,15 @@ def test_an_unusable_data_dir_is_one_line(tmp_path):
         limits.check_data_dir(blocker / "sub")
     limits.check_data_dir(tmp_path / "new" / "dir")
     assert (tmp_path / "new" / "dir").is_dir() and list((tmp_path / "new" / "dir").iterdir()) == []
+
+
+def test_drain_edges_exactly_full_and_no_more_body_key():
+    guard = limits.GuardUploads(_echo_app, max_concurrent=1, timeout_s=0.05)
+    big = limits.GuardUploads.DRAIN_BYTES
+    # exactly DRAIN_BYTES, then the (empty) end of the body: still a drained body
+    assert asyncio.run(guard._drain(Wire([b"a" * big, b""]).receive)) is True
+
+    async def one_message_without_more_body():  # ASGI: a missing more_body means False
+        return {"type": "http.request", "body": b"x"}
+
+    assert asyncio.run(guard._drain(one_message_without_more_body)) is True
