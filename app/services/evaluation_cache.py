@@ -167,7 +167,7 @@ def describe_all(
 
     workers <= 1 runs in this process (no pool), which keeps tests and debugging simple.
     """
-    from tqdm import tqdm
+    from app.progress import progress as tqdm  # plain lines off a terminal
 
     stats = stats or DescribeStats()
     start = time.perf_counter()
