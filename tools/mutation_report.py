@@ -13,7 +13,8 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-KILLED = {1, 3, 36, 37, 24, -24, 152, 255}  # test failed, pytest internal error, timeouts, type check
+KILLED = {1, 3, 37}  # a test failed, pytest internal error, caught by the type check
+TIMEOUT = {36, 24, -24, 152, 255}  # over its CPU-time limit: counted as killed, shown apart
 SURVIVED = 0
 NO_TESTS = {5, 33}
 EQUIVALENT = re.compile(r"^- `(app\.[\w.]+__mutmut_\d+)`", re.MULTILINE)
@@ -25,7 +26,7 @@ def equivalent_names(doc: Path) -> set[str]:
 
 
 def module_counts(meta: Path, equivalent: set[str]) -> Counter[str]:
-    """Counts of killed / survived / no tests / equivalent / not run / other for one source file."""
+    """Counts of killed (timeouts included) / survived / no tests / equivalent / not run / other."""
     codes: dict[str, int | None] = json.loads(meta.read_text())["exit_code_by_key"]
     out: Counter[str] = Counter()
     for name, code in codes.items():
@@ -33,6 +34,9 @@ def module_counts(meta: Path, equivalent: set[str]) -> Counter[str]:
             out["not run"] += 1
         elif code in KILLED:
             out["killed"] += 1
+        elif code in TIMEOUT:
+            out["killed"] += 1
+            out["timeout"] += 1
         elif code == SURVIVED:
             out["equivalent" if name in equivalent else "survived"] += 1
         elif code in NO_TESTS:
@@ -54,7 +58,7 @@ def main(root: Path = Path(".")) -> int:
     if not metas:
         print("no mutmut results under mutants/ (run `make mutate` first)")
         return 1
-    cols = ["killed", "survived", "no tests", "other", "equivalent", "not run"]
+    cols = ["killed", "(timeout)", "survived", "no tests", "other", "equivalent", "not run"]
     print(f"{'module':36} {'score':>6} " + " ".join(f"{c:>10}" for c in cols))
     for meta in metas:
         c = module_counts(meta, equivalent)
@@ -63,7 +67,7 @@ def main(root: Path = Path(".")) -> int:
         s = score(c)
         module = str(meta.relative_to(root / "mutants"))[: -len(".meta")]
         shown = f"{100 * s:5.1f}%" if s is not None else "    -"
-        print(f"{module:36} {shown:>6} " + " ".join(f"{c[k]:>10}" for k in cols))
+        print(f"{module:36} {shown:>6} " + " ".join(f"{c[k.strip('()')]:>10}" for k in cols))
     return 0
 
 
