@@ -14,8 +14,6 @@ repository (var/ is ignored); the meshes are never committed.
 from __future__ import annotations
 
 import argparse
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +22,7 @@ import trimesh
 from app.core.mesh import Mesh, clean, load_mesh
 from app.core.resolution import perturb
 from app.datasets.folder import read_labelled_folder
+from app.storage.blobs import atomic_write
 
 KINDS = ("remesh", "noise")
 FINE_VERTICES = 16_000
@@ -65,9 +64,9 @@ def generate(src: Path | str, out: Path | str, kind: str = "remesh", seed: int =
             mesh = perturb(mesh, nsr, int(rng.integers(2**63)))
         target = (dest / rel).with_suffix(".obj")
         target.parent.mkdir(parents=True, exist_ok=True)
-        _atomic_write(target, _obj_text(mesh))
+        atomic_write(target, _obj_text(mesh).encode())
         lines.append(f"{target.relative_to(dest).as_posix()},{row.label}\n")
-    _atomic_write(dest / "labels.csv", "file,class\n" + "".join(lines))  # last: a complete folder
+    atomic_write(dest / "labels.csv", ("file,class\n" + "".join(lines)).encode())  # last: a complete folder
     return dest
 
 
@@ -75,17 +74,6 @@ def _obj_text(mesh: Mesh) -> str:
     out = [f"v {x:.8g} {y:.8g} {z:.8g}\n" for x, y, z in mesh.vertices]
     out += [f"f {a} {b} {c}\n" for a, b, c in mesh.faces + 1]
     return "".join(out)
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
 
 
 def main(argv: list[str] | None = None) -> int:

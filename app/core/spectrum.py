@@ -50,7 +50,9 @@ def smallest_eigenpairs(
     mass_diag = np.asarray(mass.diagonal(), dtype=np.float64)
     if np.any(mass_diag <= 0):
         raise SpectrumError("a vertex has zero area: the mass matrix is singular")
-    blocks = _component_blocks(stiffness) if method in ("auto", "blocks") else []
+    # components only matter to the dense path: large meshes go to ARPACK without the graph search
+    small = method == "blocks" or (method == "auto" and n <= DENSE_MAX)
+    blocks = _component_blocks(stiffness) if small else []
     if method == "auto":
         method = "sparse" if n > DENSE_MAX else "blocks" if len(blocks) > 1 else "dense"
     if method == "blocks":

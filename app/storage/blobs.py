@@ -98,7 +98,8 @@ class BlobStore:
         None if there was none. Called inside the delete's transaction (`conn`: the database backend
         deletes its copy in it); unlink it after the commit, or put it back with os.replace if the
         transaction fails."""
-        path = self.mesh_path(sha256, file_type)
+        # this store's own file, never a subclass's fetch-on-read (it would bring back what is deleted)
+        path = BlobStore.mesh_path(self, sha256, file_type)
         trash = path.with_name(f".{path.name}.{writer_tag()}.deleted.tmp")  # one delete at a time: the lock
         try:
             os.replace(path, trash)

@@ -12,12 +12,11 @@ model id (never reused), so a cached file is never stale.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from app.storage.blobs import BlobStore, atomic_write, sha256_hex, writer_tag
+from app.storage.blobs import BlobStore, atomic_write, sha256_hex
 from app.storage.db import Database, utcnow
 
 # PostgreSQL's bytea holds up to 1 GB, and a value travels whole, in memory, on both sides: half of that
@@ -112,13 +111,7 @@ class DatabaseBlobStore(BlobStore):
                 self._delete(own, [key])
         else:
             self._delete(conn, [key])
-        path = super().mesh_path(sha256, file_type)
-        trash = path.with_name(f".{path.name}.{writer_tag()}.deleted.tmp")
-        try:
-            os.replace(path, trash)
-        except FileNotFoundError:
-            return None
-        return trash
+        return super().hide_mesh(sha256, file_type)  # this host's cached copy, moved aside alike
 
     def delete_model_files(
         self, model_id: int, sha256: str | None = None, file_type: str = "", conn: Any = None
