@@ -9,22 +9,33 @@ Transactions: write() keeps SQLite's one-writer semantics, which callers rely on
 check-then-insert of a content hash, delete's linearisability with an upload), with a transaction-level
 advisory lock; the queue's hot paths (claim, lease extension, heartbeats) use queue() instead, which
 takes row locks only (`FOR UPDATE SKIP LOCKED`), so workers on many hosts claim in parallel.
+
+Connections come from a pool per process (psycopg_pool): opening one costs a server process start
+(several ms), which made every unit of work pay it and kept the queue's throughput flat with workers.
+A process forked from one that holds a pool opens its own: a socket is never shared across processes.
 """
 
 from __future__ import annotations
 
+import os
 import re
 import sqlite3
+import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, cast
 
 import psycopg
+from psycopg_pool import ConnectionPool
 
 from app.storage.db import MIGRATIONS, Database, utcnow
 
 WRITE_LOCK = 0x5348_4150  # 'SHAP': pg_advisory_xact_lock key of write(), the one-writer lock
 MIGRATE_LOCK = WRITE_LOCK + 1
+POOL_MIN = 1  # connections each process keeps open
+POOL_MAX = 8  # per process: an API's threads beyond it wait (up to the busy timeout) for one to free
+POOL_MAX_IDLE_S = 60.0  # connections above POOL_MIN idle this long are closed
+_ABANDONED: list[ConnectionPool] = []  # pools inherited through fork(): never closed here (module doc)
 _HAS_ID = re.compile(r"^\s*INSERT\s+INTO\s+(models|jobs|vocabularies)\b", re.IGNORECASE)
 
 
@@ -101,8 +112,8 @@ class Connection:
 
 
 class PostgresDatabase(Database):
-    """One server, shared by every API replica and worker; a connection per unit of work as with SQLite
-    (a pool is the next step where connection set-up shows in the profile)."""
+    """One server, shared by every API replica and worker; each process borrows connections from its own
+    pool (at most POOL_MAX), one per unit of work as with SQLite."""
 
     dialect = "postgresql"
     skip_locked = " FOR UPDATE SKIP LOCKED"
@@ -110,17 +121,52 @@ class PostgresDatabase(Database):
     def __init__(self, url: str, busy_timeout_s: float = 30.0) -> None:
         super().__init__(url, busy_timeout_s)
         self.url = url
+        self._pool: ConnectionPool | None = None
+        self._pool_pid = 0
+        self._pool_lock = threading.Lock()
 
-    def _connect(self) -> psycopg.Connection[Any]:
-        # autocommit: a transaction is explicit (conn.transaction()), reads see each statement's snapshot
-        # lock waits bounded like SQLite's busy timeout, instead of forever (set at connect: no round trip)
-        options = f"-c lock_timeout={int(self.busy_timeout_s * 1000)}"
-        return psycopg.connect(self.url, autocommit=True, row_factory=_row_factory, options=options)
+    def _connection_pool(self) -> ConnectionPool:
+        pid = os.getpid()
+        if self._pool is not None and self._pool_pid == pid:
+            return self._pool
+        with self._pool_lock:
+            if self._pool is not None and self._pool_pid != pid:  # forked: the parent's sockets stay its own
+                _ABANDONED.append(self._pool)
+                self._pool = None
+            if self._pool is None:
+                # autocommit: a transaction is explicit (conn.transaction()), reads see each statement's
+                # snapshot; lock waits bounded like SQLite's busy timeout, instead of forever
+                options = f"-c lock_timeout={int(self.busy_timeout_s * 1000)}"
+                self._pool = ConnectionPool(
+                    self.url,
+                    min_size=POOL_MIN,
+                    max_size=POOL_MAX,
+                    max_idle=POOL_MAX_IDLE_S,
+                    timeout=self.busy_timeout_s,
+                    kwargs={"autocommit": True, "row_factory": _row_factory, "options": options},
+                    check=ConnectionPool.check_connection,  # a server restart leaves no dead connection
+                    name=f"shapebag-{pid}",
+                    open=True,
+                )
+                self._pool_pid = pid
+            return self._pool
+
+    def close(self) -> None:
+        """Close this process's connections (the pool reopens on the next use)."""
+        with self._pool_lock:
+            pool, self._pool = self._pool, None
+        if pool is not None and self._pool_pid == os.getpid():
+            pool.close()
+
+    @contextmanager
+    def _connection(self) -> Iterator[psycopg.Connection[Any]]:
+        with self._connection_pool().connection() as conn:
+            yield conn
 
     @contextmanager
     def read(self) -> Iterator[sqlite3.Connection]:
         # typed as sqlite3.Connection: callers use only the subset Connection implements (module doc)
-        with self._connect() as conn:
+        with self._connection() as conn:
             yield cast(sqlite3.Connection, Connection(conn))
 
     @contextmanager
@@ -135,14 +181,11 @@ class PostgresDatabase(Database):
 
     @contextmanager
     def _transaction(self, lock: int | None) -> Iterator[sqlite3.Connection]:
-        conn = self._connect()
-        try:
-            with conn.transaction():  # BEGIN ... COMMIT, or ROLLBACK on any exception
-                if lock is not None:
-                    conn.execute("SELECT pg_advisory_xact_lock(%s)", (lock,))
-                yield cast(sqlite3.Connection, Connection(conn))
-        finally:
-            conn.close()
+        # the pool rolls back a connection returned inside a transaction and drops a broken one
+        with self._connection() as conn, conn.transaction():  # BEGIN ... COMMIT, or ROLLBACK
+            if lock is not None:
+                conn.execute("SELECT pg_advisory_xact_lock(%s)", (lock,))
+            yield cast(sqlite3.Connection, Connection(conn))
 
     def migrate(self) -> int:
         with self._transaction(lock=MIGRATE_LOCK) as conn:  # one migrating process at a time
