@@ -1,0 +1,145 @@
+"""Vocabulary.fit, training_features, describe_meta, the fit metadata and with_fusion's edges, called
+directly (issue 15 mutation pass: these were reached only through the service tests' seeded data
+directory, a session fixture mutmut cannot time per mutant)."""
+
+from __future__ import annotations
+
+from datetime import datetime
+
+import numpy as np
+import pytest
+
+from app.core.descriptor import select
+from app.core.fusion import pairwise_l1
+from app.core.pipeline import ShapeDescription
+from app.core.vocabulary import VOCABULARY_FORMAT, EncodeParams, Vocabulary, training_features
+
+WORDS = np.array([[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0]], np.float32)
+
+
+def description(p: np.ndarray, keypoints=None, eigenvalues=None, column: int = 19) -> ShapeDescription:
+    """A stand-in whose Run 5 selection (HKS columns 19, 39, 59, 79) is p (n, 4); Run 1 is column 19."""
+    n = p.shape[0]
+    h = np.zeros((n, 100), np.float32)
+    h[:, [column, column + 20, column + 40, column + 60]] = p
+    return ShapeDescription(
+        hks=h,
+        weights=np.full(n, 1.0 / n, np.float32),
+        keypoints=np.ones(n, bool) if keypoints is None else np.asarray(keypoints),
+        eigenvalues=np.arange(5.0) if eigenvalues is None else np.asarray(eigenvalues, float),
+        input_vertices=n,
+    )
+
+
+def clusters(seed: int, n: int = 40) -> np.ndarray:
+    """(n, 4) points around 4 well-separated centres, 4 apart."""
+    rng = np.random.default_rng(seed)
+    centres = np.eye(4) * 4.0
+    return centres[np.arange(n) % 4] + 0.01 * rng.normal(size=(n, 4))
+
+
+def test_training_features_stack_the_keypoints_of_every_description_in_order():
+    a, b = clusters(0, 6), clusters(1, 5)
+    da = description(a, keypoints=[True, False, True, False, False, True])
+    db = description(b, keypoints=[False, True, False, False, True])
+    assert np.array_equal(
+        training_features([da, db]), np.concatenate([a[[0, 2, 5]], b[[1, 4]]]).astype(np.float32)
+    )
+    everything = training_features([da, db], keypoints_only=False)
+    assert np.array_equal(everything, np.concatenate([a, b]).astype(np.float32))
+
+
+def test_training_features_select_the_run():
+    d = description(np.random.default_rng(0).random((3, 4)))
+    for run in ("run1", "run2", "run5"):
+        assert np.array_equal(training_features([d], run=run), select(d.hks, run))
+    with pytest.raises(ValueError, match="no descriptions to fit a vocabulary on"):
+        training_features([])
+
+
+def test_fit_clusters_the_keypoints_with_its_size_run_seed_and_metadata():
+    p = clusters(0, 40)
+    keep = np.arange(40) < 32  # the last 8 are not keypoints: k-means never sees them
+    far = p.copy()
+    far[32:] += 100.0
+    descs = [description(far, keypoints=keep), description(clusters(1, 40))]
+    vocab = Vocabulary.fit(descs, size=4, run="run5", seed=3, metadata={"note": "x", "seed": 99})
+    assert vocab.centers.shape == (4, 4) and vocab.centers.dtype == np.float32 and vocab.run == "run5"
+    assert np.abs(vocab.centers).max() < 5  # no word out at the +100 non-keypoints
+    assert sorted(np.round(vocab.centers).argmax(axis=1).tolist()) == [0, 1, 2, 3]
+    meta = vocab.metadata
+    assert meta["trained_on_descriptors"] == 72 and meta["size"] == 4 and meta["run"] == "run5"
+    assert meta["dimension"] == 4 and meta["format"] == VOCABULARY_FORMAT
+    assert meta["note"] == "x" and meta["seed"] == 99  # the caller's metadata wins
+    every = Vocabulary.fit(descs, size=4, seed=3, keypoints_only=False)
+    assert every.metadata["trained_on_descriptors"] == 80 and every.metadata["seed"] == 3
+    assert np.abs(every.centers).max() > 50  # now the far points make a word
+
+
+def test_fit_is_deterministic_for_a_seed():
+    descs = [description(np.random.default_rng(s).random((60, 4))) for s in range(2)]
+    a = Vocabulary.fit(descs, size=6, seed=1)
+    assert np.array_equal(a.centers, Vocabulary.fit(descs, size=6, seed=1).centers)
+    assert not np.array_equal(a.centers, Vocabulary.fit(descs, size=6, seed=2).centers)
+
+
+def test_fit_metadata_records_the_inertia_sigma_and_time():
+    feats = clusters(4, 80)
+    vocab = Vocabulary.fit_features(feats, size=4, run="run5", seed=0)
+    d2 = ((feats[:, None, :] - vocab.centers[None].astype(np.float64)) ** 2).sum(axis=2).min(axis=1)
+    assert vocab.metadata["inertia"] == pytest.approx(d2.sum(), rel=1e-4)
+    assert vocab.sigma == pytest.approx(np.median(np.sqrt(d2)), rel=1e-3)
+    created = datetime.fromisoformat(vocab.metadata["created_at"])
+    assert created.tzinfo is not None and abs((datetime.now(created.tzinfo) - created).total_seconds()) < 60
+
+
+def test_sigma_falls_back_to_the_mean_then_to_one():
+    """Most descriptors exactly on their word: the median distance is 0 and sigma is the mean distance;
+    every one on its word: 1. (16 points with dyadic coordinates: k-means' centring stays exact.)"""
+    words = np.repeat(np.eye(4)[1:], 4, axis=0)
+    feats = np.concatenate([words, [[1, 0, 0, 0], [1, 0, 0, 0], [1, 0.5, 0, 0], [1, -0.5, 0, 0]]])
+    assert Vocabulary.fit_features(feats, size=4, run="run5").sigma == 2 * 0.5 / 16
+    assert Vocabulary.fit_features(np.repeat(np.eye(4), 3, axis=0), size=4, run="run5").sigma == 1.0
+
+
+def test_fit_features_refuses_the_wrong_width_in_words():
+    with pytest.raises(ValueError, match=r"features must be \(N, 4\) for run5, got \(10, 3\)"):
+        Vocabulary.fit_features(np.zeros((10, 3)), size=2, run="run5")
+    with pytest.raises(ValueError, match=r"features must be \(N, 4\) for run5, got \(10,\)"):
+        Vocabulary.fit_features(np.zeros(10), size=2, run="run5")
+    with pytest.raises(ValueError, match="^3 distinct descriptors cannot make 4 words$"):
+        Vocabulary.fit_features(np.repeat(np.eye(4)[:3], 5, axis=0), size=4, run="run5")
+    assert Vocabulary.fit_features(np.eye(4), size=4, run="run5").size == 4  # exactly enough
+
+
+def test_describe_meta_is_the_metadata_with_the_live_run_sigma_and_size():
+    vocab = Vocabulary(WORDS, run="run5", sigma=0.25, metadata={"size": 99, "run": "old", "note": "n"})
+    assert vocab.describe_meta() == {"size": 3, "run": "run5", "sigma": 0.25, "note": "n"}
+    assert vocab.metadata == {"size": 99, "run": "old", "note": "n"}  # not changed in place
+
+
+def test_with_fusion_needs_two_shapes_and_keeps_the_metadata():
+    plain = Vocabulary(WORDS, run="run5", sigma=0.5, metadata={"note": "kept"})
+    one = [description(clusters(0, 4), eigenvalues=[0.0, 2.0, 3.0])]
+    with pytest.raises(ValueError, match="^fusion scales need at least 2 training shapes$"):
+        plain.with_fusion(one)
+    two = [*one, description(clusters(1, 4) + 0.5, eigenvalues=[0.0, 1.0])]  # one non-zero eigenvalue
+    fused = plain.with_fusion(two)
+    assert fused.fusion is not None and fused.fusion.count == 1  # c = 1 is enough
+    assert fused.metadata["note"] == "kept" and "fusion" not in plain.metadata
+
+
+def test_with_fusion_scales_the_bof_encoded_with_the_params():
+    """The BoF scale is the median pairwise L1 of the training BoFs as `params` encode them."""
+    rng = np.random.default_rng(5)
+    descs = [
+        description(rng.random((8, 4)), keypoints=rng.random(8) < 0.5, eigenvalues=np.arange(6.0) * (i + 1))
+        for i in range(5)
+    ]
+    plain = Vocabulary(WORDS, run="run5", sigma=0.5)
+    params = EncodeParams(keypoints_only=True, mode="soft")
+    scales = plain.with_fusion(descs, params).fusion
+    bofs = np.stack([plain.bof(d, params) for d in descs])
+    assert scales is not None and scales.bof == pytest.approx(np.median(pairwise_l1(bofs)))
+    default = np.stack([plain.bof(d) for d in descs])
+    assert not np.isclose(np.median(pairwise_l1(default)), scales.bof)
