@@ -29,6 +29,7 @@ class DescribeSettings(BaseModel):
     smoothing_weights: Literal["uniform", "cotangent"] = DescribeParams.smoothing_weights  # type: ignore[assignment]
     time_range: Literal["spectrum", "weyl"] = DescribeParams.time_range  # type: ignore[assignment]
     laplacian: Literal["cotangent", "intrinsic"] = DescribeParams.laplacian  # type: ignore[assignment]
+    remesh: bool = DescribeParams.remesh
     subdivision: str = DescribeParams.subdivision
     solver: str = "auto"
 

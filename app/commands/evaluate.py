@@ -58,6 +58,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="Taubin weights: cotangent (intrinsic) or uniform (default %(default)s)")
     p.add_argument("--laplacian", choices=LAPLACIANS, default=EvaluationOptions.laplacian,
                    help="cotangent (the paper's) or intrinsic (intrinsic Delaunay; default %(default)s)")
+    p.add_argument("--remesh", action=argparse.BooleanOptionalAction, default=EvaluationOptions.remesh,
+                   help="isotropic remeshing at the canonical resolution (default %(default)s)")
     p.add_argument("--subdivision", choices=SUBDIVISIONS, default=EvaluationOptions.subdivision,
                    help="how coarse meshes are refined to the canonical resolution (default %(default)s)")
     p.add_argument("--vocabulary", type=Path, metavar="DIR",
@@ -115,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
         smoothing=args.smoothing,
         smoothing_weights=args.smoothing_weights,
         laplacian=args.laplacian,
+        remesh=args.remesh,
         subdivision=args.subdivision,
         vocabulary=args.vocabulary,
         fit_on=args.fit_on,

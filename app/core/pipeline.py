@@ -17,6 +17,7 @@ from app.core import hks as hks_mod
 from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import LAPLACIANS, laplacian
 from app.core.mesh import Mesh
+from app.core.remeshing import isotropic_remesh
 from app.core.resolution import SUBDIVISIONS, normalize_scale, smooth, to_resolution
 from app.core.smoothing import WEIGHTS, cotangent_taubin
 from app.core.spectrum import smallest_eigenpairs
@@ -43,6 +44,8 @@ class DescribeParams:
     smoothing_weights: str = "uniform"
     # cotangent (the paper's) | intrinsic (cotangent weights of the intrinsic Delaunay triangulation)
     laplacian: str = "cotangent"
+    # isotropic remeshing at the canonical resolution (app.core.remeshing): the same surface, evenly sampled
+    remesh: bool = False
     subdivision: str = "midpoint"  # how coarse meshes reach the canonical resolution: midpoint | loop
     solver: str = "auto"  # auto | dense | sparse
     keypoint_filter: KeypointFilter = field(default_factory=KeypointFilter)
@@ -126,6 +129,8 @@ def describe_filters(
     clock = _Clock()
     # resampling and smoothing are scale-free: one normalisation, after them, gives unit area
     fine = to_resolution(mesh, params.target_vertices, subdivision=params.subdivision)
+    if params.remesh:
+        fine = isotropic_remesh(fine, params.target_vertices)
     smoothed = (cotangent_taubin(fine, params.smoothing) if params.smoothing_weights == "cotangent"
                 else smooth(fine, params.smoothing))
     work = normalize_scale(smoothed)

@@ -54,6 +54,7 @@ class EvaluationOptions:
     smoothing: int = DescribeParams.smoothing  # Taubin iterations
     smoothing_weights: str = DescribeParams.smoothing_weights  # cotangent (intrinsic) | uniform
     laplacian: str = DescribeParams.laplacian  # cotangent | intrinsic (intrinsic Delaunay)
+    remesh: bool = DescribeParams.remesh  # isotropic remeshing at the canonical resolution
     subdivision: str = DescribeParams.subdivision  # midpoint | loop
     vocabulary: Path | None = None  # frozen vocabulary directory: adds a "frozen" line per row
     fit_on: str = "all"  # all | half: "half" adds a line with a vocabulary fit on half the classes
@@ -99,7 +100,7 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
         base = DescribeParams(
             k=options.k, target_vertices=options.target_vertices, time_range=options.time_range,
             smoothing=options.smoothing,
-            smoothing_weights=options.smoothing_weights, laplacian=options.laplacian,
+            smoothing_weights=options.smoothing_weights, laplacian=options.laplacian, remesh=options.remesh,
             subdivision=options.subdivision, keypoint_filter=flt,
         )
     except ValueError as exc:  # e.g. an unknown subdivision

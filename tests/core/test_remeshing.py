@@ -1,0 +1,101 @@
+"""Isotropic remeshing: the same surface, evenly sampled at the canonical resolution."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+import trimesh
+
+from app.core.laplacian import laplacian
+from app.core.mesh import Mesh
+from app.core.remeshing import edge_length, isotropic_remesh, remeshable
+from app.core.resolution import normalize_scale
+
+
+def _sphere(subdivisions: int = 3) -> Mesh:
+    s = trimesh.creation.icosphere(subdivisions=subdivisions)
+    return Mesh(np.asarray(s.vertices, float), np.asarray(s.faces, np.int64))
+
+
+def _edge_lengths(mesh: Mesh) -> np.ndarray:
+    e = mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    return np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1)
+
+
+def _squashed_sphere() -> Mesh:
+    """A unit sphere triangulated badly: a UV sphere (slivers and fans at the poles)."""
+    s = trimesh.creation.uv_sphere(count=[48, 24])
+    s.merge_vertices()
+    return Mesh(np.asarray(s.vertices, float), np.asarray(s.faces, np.int64))
+
+
+def test_edge_length_gives_the_target_count_for_equilateral_triangles():
+    # equilateral mesh: n vertices, 2n faces of area √3/4 h² -> area = n √3/2 h²
+    h = edge_length(1.0, 1000)
+    assert np.isclose(1000 * np.sqrt(3) / 2 * h * h, 1.0)
+
+
+def test_remeshed_sphere_stays_on_the_sphere_with_even_edges():
+    uv = _squashed_sphere()
+    out = isotropic_remesh(uv, 600)
+    assert out is not uv
+    assert 0.7 * 600 <= out.n_vertices <= 1.3 * 600
+    radii = np.linalg.norm(out.vertices, axis=1)
+    assert np.abs(radii - 1.0).max() < 0.01  # projected back onto the input surface
+    assert abs(out.area() - uv.area()) < 0.02 * uv.area()
+    before, after = _edge_lengths(uv), _edge_lengths(out)
+    assert after.std() / after.mean() < 0.5 * before.std() / before.mean()  # evener sampling
+    assert abs(after.mean() - edge_length(uv.area(), 600)) < 0.25 * after.mean()
+
+
+def test_two_triangulations_of_one_sphere_are_sampled_alike_after_remeshing():
+    # the Bag of Features counts vertices: what must agree is how the area is shared among them
+    # (the lumped mass), and the spectrum must still be the sphere's, l(l+1) with multiplicity 2l+1
+    expected = np.array([0] + [2] * 3 + [6] * 5 + [12] * 7, dtype=float)
+    for mesh in (_sphere(3), _squashed_sphere()):
+        out = normalize_scale(isotropic_remesh(mesh, 500))
+        L, M = laplacian(out.vertices, out.faces, "intrinsic")
+        mass = M.diagonal()
+        assert mass.std() / mass.mean() < 0.25
+        lam = scipy.linalg.eigh(L.toarray(), M.toarray(), eigvals_only=True, subset_by_index=[0, 15])
+        # unit area: a sphere of radius r = 1/sqrt(4π) has eigenvalues l(l+1)/r²
+        assert np.allclose(lam * (1 / (4 * np.pi)), expected, rtol=0.03, atol=1e-8)
+    uv_mass = laplacian(*_as_arrays(normalize_scale(_squashed_sphere())), "intrinsic")[1].diagonal()
+    assert uv_mass.std() / uv_mass.mean() > 0.4  # the input was uneven: the test could fail
+
+
+def _as_arrays(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    return mesh.vertices, mesh.faces
+
+
+def test_inconsistent_winding_and_nonmanifold_edges_are_left_alone():
+    s = _sphere(2)
+    flipped = s.faces.copy()
+    flipped[0] = flipped[0][::-1]
+    bad = Mesh(s.vertices, flipped)
+    assert remeshable(s) and not remeshable(bad)
+    assert isotropic_remesh(bad, 500) is bad  # the remesher would crash the process on it
+    # a fin: a third face on an edge of the sphere
+    i, j = s.faces[0, 0], s.faces[0, 1]
+    fin = Mesh(np.vstack([s.vertices, [[2.0, 2.0, 2.0]]]),
+               np.vstack([s.faces, [[i, j, len(s.vertices)]]]))
+    assert not remeshable(fin)
+    assert isotropic_remesh(fin, 500) is fin
+
+
+def test_zero_target_keeps_the_mesh():
+    s = _sphere(1)
+    assert isotropic_remesh(s, 0) is s
+
+
+def test_a_pinched_vertex_is_left_alone():
+    # two spheres welded at one vertex: every edge has two faces and the winding is consistent,
+    # but the shared vertex has two fans of faces (a pinch), which crashes the remesher
+    s = _sphere(1)
+    n = len(s.vertices)
+    second = s.vertices + (s.vertices[0] - s.vertices[3])  # moved so that its vertex 3 lands on vertex 0
+    f2 = s.faces + n
+    f2[f2 == n + 3] = 0  # the second sphere's vertex 3 is the first sphere's vertex 0
+    pinched = Mesh(np.vstack([s.vertices, second]), np.vstack([s.faces, f2]))
+    assert remeshable(s) and not remeshable(pinched)
+    assert isotropic_remesh(pinched, 300) is pinched
