@@ -70,6 +70,12 @@ def test_header_names_are_case_insensitive():
     assert form.fields == {"label": "x"} and form.file("mesh") == ("m.obj", b"1")
 
 
+def test_each_part_has_its_own_headers():
+    """A part without a Content-Disposition does not inherit the previous part's name."""
+    form = _read(_end(_field(b"label", b"a"), _part([b"Content-Type: text/plain"], b"b"), _file(b"1")))
+    assert form.fields == {"label": "a", "": "b"} and form.file() == ("m.obj", b"1")
+
+
 def test_a_missing_file_field_is_named_in_words():
     form = _read(_end(_field(b"name", b"n")))
     with pytest.raises(InvalidInputError, match="^the multipart form has no file field 'file'$"):

@@ -87,7 +87,7 @@ def test_a_given_name_wins_and_an_empty_label_is_none(ctx):
     ("data", "filename", "metadata", "error", "message"),
     [
         (TETRA, "chair.docx", None, UnsupportedFormatError, "docx"),
-        (b"", "chair.obj", None, InvalidInputError, "the file is empty"),
+        (b"", "chair.obj", None, InvalidInputError, "^the file is empty$"),
         (TETRA, "chair.obj", {"x": float("nan")}, InvalidInputError, "NaN"),
     ],
 )
@@ -159,6 +159,44 @@ def test_running_jobs_do_not_fill_the_queue(ctx):
     with ctx.db.write() as conn:
         conn.execute("UPDATE jobs SET state = 'running'")
     assert ingestion.submit(ctx, TETRA, "a.obj").job_id is not None
+
+
+def _lose_the_put_file(ctx, monkeypatch):
+    """put_mesh writes the file, then a delete of the same content removes it (before the lock)."""
+    put = ctx.blobs.put_mesh
+
+    def put_then_lost(data, file_type):
+        digest, path = put(data, file_type)
+        path.unlink()
+        return digest, path
+
+    monkeypatch.setattr(ctx.blobs, "put_mesh", put_then_lost)
+
+
+def test_a_full_queue_refuses_even_when_the_file_is_already_gone(ctx, monkeypatch):
+    ctx = ingestion.ServiceContext(ctx.settings.model_copy(update={"queue_limit": 1}), ctx.db, ctx.blobs)
+    _queue(ctx, 1)
+    _lose_the_put_file(ctx, monkeypatch)
+    with pytest.raises(QueueFullError):
+        ingestion.submit(ctx, TETRA, "a.obj")
+
+
+def test_a_failed_model_under_another_extension_when_that_file_is_already_gone(ctx, monkeypatch):
+    first = ingestion.submit(ctx, TETRA, "a.obj")
+    _fail(ctx, first.model.id)
+    _lose_the_put_file(ctx, monkeypatch)
+    again = ingestion.submit(ctx, TETRA, "a.off")
+    assert again.job_id is not None and _mesh_files(ctx) == [f"{first.model.sha256}.obj"]
+
+
+def test_a_failed_model_is_queued_again_on_the_database_blob_store(settings):
+    """The mesh is stored inside the submit's own transaction (a second one would wait on it)."""
+    ctx = open_context(settings.model_copy(update={"blob_backend": "database"}))
+    first = ingestion.submit(ctx, TETRA, "a.obj")
+    _fail(ctx, first.model.id)
+    again = ingestion.submit(ctx, TETRA, "a.obj")
+    assert again.job_id is not None and again.model.status == "queued"
+    assert ctx.blobs.mesh_path(first.model.sha256, "obj").read_bytes() == TETRA
 
 
 def test_a_full_queue_keeps_the_file_of_a_failed_model(ctx):
@@ -355,7 +393,7 @@ def test_a_vocabulary_that_keeps_changing_gives_up_after_five_tries(ctx, fakes):
 
     fakes.on_encode = swap
     model_id, job = _submitted_job(ctx)
-    with pytest.raises(RuntimeError, match="the active vocabulary kept changing during ingestion"):
+    with pytest.raises(RuntimeError, match="^the active vocabulary kept changing during ingestion$"):
         ingestion.run_ingest(ctx, job)
     assert len(fakes.encode) == 5
     assert _model(ctx, model_id).status == "queued" and _job(ctx, job.id).state == "queued"
