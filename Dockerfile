@@ -8,19 +8,25 @@
 # when pyproject.toml changes), then the shapebag package itself (< 1 MB: all a code change rebuilds, ships
 # and pulls).
 ARG BASE_IMAGE=python:3.12-slim
+# optional extras of pyproject.toml to install, comma-separated: `postgres` (psycopg + psycopg_pool) for
+# SHAPEBAG_DATABASE_URL=postgresql://... (docker-compose.scale.yml builds with it)
+ARG EXTRAS=""
 
-# ---- deps: a virtual environment with the dependencies only, keyed on pyproject.toml ----
+# ---- deps: a virtual environment with the dependencies only, keyed on pyproject.toml (and EXTRAS) ----
 FROM ${BASE_IMAGE} AS deps
+ARG EXTRAS
 ENV PIP_NO_CACHE_DIR=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
     PATH=/opt/venv/bin:$PATH
 RUN python3 -m venv /opt/venv
 WORKDIR /src
 COPY pyproject.toml ./
-# The list comes from [project].dependencies (tomllib: Python >= 3.11): one source of truth. The libraries'
-# own test suites (~70 MB) are never imported at runtime. The .pth puts the package directory (filled by the
-# `package` stage) on the venv's path.
-RUN python3 -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies']))" \
+# The list comes from [project].dependencies plus the EXTRAS' lists (tomllib: Python >= 3.11): one source of
+# truth. The libraries' own test suites (~70 MB) are never imported at runtime. The .pth puts the package
+# directory (filled by the `package` stage) on the venv's path.
+RUN python3 -c "import os, tomllib; p = tomllib.load(open('pyproject.toml', 'rb'))['project']; \
+extras = [e for e in os.environ.get('EXTRAS', '').split(',') if e]; \
+print('\n'.join(p['dependencies'] + [d for e in extras for d in p['optional-dependencies'][e]]))" \
         > /tmp/requirements.txt \
     && pip install --prefer-binary -r /tmp/requirements.txt "setuptools>=68" wheel \
     && rm /tmp/requirements.txt \

@@ -40,9 +40,9 @@ test: install chromium  ## the whole suite, ~10 min on 2 cores; starts (then sto
 chromium:  ## Debian's chromium for the browser tests (installed as root; otherwise says they will skip)
 	@bash .ci/chromium.sh
 
-test-scale: install postgres  ## storage + service flow on a throwaway PostgreSQL (claim race, killed worker, 2 API processes)
-	SHAPEBAG_TEST_POSTGRES=1 $(BIN)/pytest -q -ra -m postgres tests/storage tests/services/test_both_engines.py \
-	  tests/deploy/test_api_processes.py
+test-scale: install postgres  ## PostgreSQL suites (claim race, killed worker, 2 API processes) + the scaled compose kill test
+	SHAPEBAG_TEST_POSTGRES=1 $(BIN)/pytest -q -ra -m "postgres or docker" tests/storage \
+	  tests/services/test_both_engines.py tests/deploy/test_api_processes.py tests/deploy/test_scale_compose.py
 
 postgres:  ## Debian's postgresql for test-scale (installed as root; otherwise says its cases will skip)
 	@bash .ci/postgres.sh

@@ -116,13 +116,14 @@ class Compose:
 
     env: dict[str, str]
     project: str = field(default_factory=lambda: f"shapebag-test-{uuid.uuid4().hex[:8]}")
+    file: str = "docker-compose.yml"  # docker-compose.scale.yml: tests/deploy/test_scale_compose.py
 
     @property
     def base_url(self) -> str:
         return f"http://127.0.0.1:{self.env['SHAPEBAG_PORT']}"
 
     def run(self, *args: str, timeout: float = 300, check: bool = True) -> subprocess.CompletedProcess[str]:
-        cmd = ["docker", "compose", "-p", self.project, "-f", str(REPO / "docker-compose.yml"), *args]
+        cmd = ["docker", "compose", "-p", self.project, "-f", str(REPO / self.file), *args]
         try:
             result = _run(cmd, self.env, timeout)
         except subprocess.TimeoutExpired as exc:
@@ -141,7 +142,7 @@ class Compose:
             "-p",
             self.project,
             "-f",
-            str(REPO / "docker-compose.yml"),
+            str(REPO / self.file),
             "logs",
             "--no-color",
             "--tail",
