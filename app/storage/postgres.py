@@ -21,6 +21,7 @@ import os
 import re
 import sqlite3
 import threading
+import weakref
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, cast
@@ -149,6 +150,9 @@ class PostgresDatabase(Database):
                     open=True,
                 )
                 self._pool_pid = pid
+                # a Database dropped without close(): close its pool too, but never from the thread that
+                # collects it (it may be one of the pool's own threads, which cannot join themselves)
+                weakref.finalize(self, _close_soon, self._pool, pid).atexit = False
             return self._pool
 
     def close(self) -> None:
@@ -208,6 +212,11 @@ class PostgresDatabase(Database):
             return True
         except psycopg.Error:
             return False
+
+
+def _close_soon(pool: ConnectionPool, pid: int) -> None:
+    if os.getpid() == pid and not pool.closed:  # a forked child leaves its parent's sockets alone
+        threading.Thread(target=pool.close, name="shapebag-pool-close", daemon=True).start()
 
 
 def _statements(script: str) -> list[str]:
