@@ -113,7 +113,7 @@ class FlakyArpack:
 REAL_EIGSH = sla.eigsh
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def ellipsoid_operators(ellipsoid_mesh):
     L, M = cotangent_laplacian(ellipsoid_mesh.vertices, ellipsoid_mesh.faces)
     exact = smallest_eigenpairs(L, M, k=10, method="exact")
@@ -180,3 +180,63 @@ def test_after_two_failures_a_large_mesh_is_an_error_naming_the_cause(ellipsoid_
     monkeypatch.setattr(spectrum, "DENSE_MAX", L.shape[0] // 2)  # exactly 2 * DENSE_MAX: still dense
     monkeypatch.setattr(spectrum.sla, "eigsh", FlakyArpack(failures=2))
     assert smallest_eigenpairs(L, M, k=10, method="sparse").eigenvalues.shape == (10,)
+
+
+def test_k_is_at_least_one_and_a_massless_vertex_is_refused_in_words(ellipsoid_operators):
+    L, M, exact = ellipsoid_operators
+    one = smallest_eigenpairs(L, M, k=1)
+    assert one.eigenvalues.shape == (1,) and one.eigenvectors.shape == (L.shape[0], 1)
+    mass = M.diagonal().copy()
+    mass[7] = 0.0
+    with pytest.raises(SpectrumError, match="^a vertex has zero area: the mass matrix is singular$"):
+        smallest_eigenpairs(L, sp.diags(mass), k=5)
+    with pytest.raises(ValueError, match="^unknown eigen-solver method 'lobpcg'$"):
+        smallest_eigenpairs(L, M, k=5, method="lobpcg")
+
+
+def test_auto_solves_a_multi_part_mesh_up_to_dense_max_per_component(monkeypatch):
+    v, f, labels = _interleaved_spheres(2)
+    L, M = cotangent_laplacian(v, f)
+    monkeypatch.setattr(spectrum, "DENSE_MAX", L.shape[0])  # exactly at the limit: still dense, per part
+    spec = smallest_eigenpairs(L, M, k=20)
+    assert _support(spec.eigenvectors, labels) == [1] * 20
+
+
+def test_auto_uses_arpack_above_dense_max_only(ellipsoid_operators, monkeypatch):
+    L, M, exact = ellipsoid_operators
+    n = L.shape[0]
+    for dense_max, arpack in ((n, False), (n - 1, True)):
+        spy = FlakyArpack(failures=0)
+        monkeypatch.setattr(spectrum, "DENSE_MAX", dense_max)
+        monkeypatch.setattr(spectrum.sla, "eigsh", spy)
+        spec = smallest_eigenpairs(L, M, k=10)
+        assert bool(spy.calls) is arpack
+        assert np.allclose(spec.eigenvalues, exact.eigenvalues, rtol=1e-6, atol=1e-9)
+
+
+def test_the_sparse_solve_is_reproducible_and_seeded(ellipsoid_operators, monkeypatch):
+    L, M, _ = ellipsoid_operators
+    runs = []
+    for seed in (None, 0, 0):
+        spy = FlakyArpack(failures=0)
+        monkeypatch.setattr(spectrum.sla, "eigsh", spy)
+        smallest_eigenpairs(L, M, k=10, method="sparse", **({} if seed is None else {"seed": seed}))
+        runs.append(spy.calls[0]["v0"])
+    assert np.array_equal(runs[0], runs[1]) and np.array_equal(runs[1], runs[2])  # the default seed is 0
+    assert np.array_equal(runs[0], np.random.default_rng(0).standard_normal(L.shape[0]))
+
+
+def test_round_off_below_zero_is_clipped(ellipsoid_operators, monkeypatch):
+    """L is positive semi-definite: a solver's -1e-15 for the constant mode is reported as 0."""
+    L, M, exact = ellipsoid_operators
+    dense = spectrum._dense
+
+    def with_negative_zero(stiffness, mass_diag, k, mixed=True):
+        vals, vecs = dense(stiffness, mass_diag, k, mixed)
+        vals = vals.copy()
+        vals[0] = -1e-15
+        return vals, vecs
+
+    monkeypatch.setattr(spectrum, "_dense", with_negative_zero)
+    spec = smallest_eigenpairs(L, M, k=5, method="dense")
+    assert spec.eigenvalues[0] == 0.0 and np.all(spec.eigenvalues >= 0)
