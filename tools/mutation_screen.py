@@ -93,7 +93,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tests", nargs="+", required=True)
     parser.add_argument("--limit", type=float, default=120.0, help="wall-clock seconds per mutant")
     parser.add_argument("--rerun", action="store_true", help="run mutants that already have a result")
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)  # unknown options (--deselect=...) go to pytest
+    args.tests += extra
     where = metas()
     names = sorted(n for n in where if any(fnmatch.fnmatchcase(n, p) for p in args.patterns))
     if not args.rerun:

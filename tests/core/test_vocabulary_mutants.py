@@ -12,7 +12,7 @@ import pytest
 from app.core.descriptor import select
 from app.core.fusion import pairwise_l1
 from app.core.pipeline import ShapeDescription
-from app.core.vocabulary import VOCABULARY_FORMAT, EncodeParams, Vocabulary, training_features
+from app.core.vocabulary import VOCABULARY_FORMAT, EncodeParams, Vocabulary, params_dict, training_features
 
 WORDS = np.array([[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0]], np.float32)
 
@@ -53,7 +53,7 @@ def test_training_features_select_the_run():
     d = description(np.random.default_rng(0).random((3, 4)))
     for run in ("run1", "run2", "run5"):
         assert np.array_equal(training_features([d], run=run), select(d.hks, run))
-    with pytest.raises(ValueError, match="no descriptions to fit a vocabulary on"):
+    with pytest.raises(ValueError, match="^no descriptions to fit a vocabulary on$"):
         training_features([])
 
 
@@ -143,3 +143,78 @@ def test_with_fusion_scales_the_bof_encoded_with_the_params():
     assert scales is not None and scales.bof == pytest.approx(np.median(pairwise_l1(bofs)))
     default = np.stack([plain.bof(d) for d in descs])
     assert not np.isclose(np.median(pairwise_l1(default)), scales.bof)
+
+
+def test_fit_defaults_to_64_words_seed_0_and_passes_the_run():
+    rng = np.random.default_rng(7)
+    descs = [description(rng.random((80, 4))) for _ in range(2)]
+    vocab = Vocabulary.fit(descs)
+    assert vocab.size == 64 and vocab.metadata["seed"] == 0
+    assert np.array_equal(vocab.centers, Vocabulary.fit(descs, seed=0).centers)
+    run2 = Vocabulary.fit(descs, size=8, run="run2")
+    assert run2.run == "run2" and run2.centers.shape == (8, 5) and run2.metadata["dimension"] == 5
+    assert Vocabulary.fit_features(rng.random((70, 4)), run="run5").size == 64
+
+
+def test_bof_uses_the_vocabulary_run_the_mode_and_float32():
+    p = np.array([[0.1, 0, 0, 0], [0.9, 0.2, 0, 0], [0.2, 0.7, 0, 0]])
+    d = description(p, column=0)  # run1 reads columns 0, 20, 40, ... of the 100
+    run1 = Vocabulary(np.eye(6, dtype=np.float32)[:3], run="run1", sigma=0.5)
+    expected = run1.quantize(select(d.hks, "run1")).mean(axis=0)
+    assert np.allclose(run1.encode(d), expected)
+    vocab = Vocabulary(WORDS, run="run5", sigma=0.5)
+    d5 = description(p)
+    soft = EncodeParams(mode="soft")
+    out = vocab.encode(d5, soft)
+    assert out.dtype == np.float32 and vocab.encode(d5).dtype == np.float32
+    assert np.allclose(out, vocab.quantize(p, soft).mean(axis=0), atol=1e-6)
+    assert not np.allclose(out, vocab.encode(d5))  # soft is not hard
+
+
+def test_bof_normalises_by_the_total_weight_and_an_empty_selection_is_zero():
+    vocab = Vocabulary(WORDS, run="run5", sigma=0.5)
+    p = np.array([[0, 0, 0, 0], [1, 0, 0, 0]], float)
+    half = description(p, keypoints=[False, False])
+    half = ShapeDescription(
+        hks=half.hks,
+        weights=np.array([0.125, 0.375], np.float32),
+        keypoints=half.keypoints,
+        eigenvalues=half.eigenvalues,
+        input_vertices=2,
+    )
+    assert np.allclose(vocab.encode(half, EncodeParams(area_weighted=True)), [0.25, 0.75, 0.0])
+    nothing = vocab.encode(half, EncodeParams(keypoints_only=True))
+    assert np.array_equal(nothing, np.zeros(3, np.float32))  # no keypoint: zero, not 0/0
+
+
+def test_soft_width_is_sigma_scale_times_the_vocabulary_sigma():
+    vocab = Vocabulary(WORDS, run="run5", sigma=0.5)
+    p = np.array([[0.3, 0.1, 0, 0]])
+    theta = vocab.quantize(p, EncodeParams(mode="soft", sigma_scale=3.0))
+    d2 = ((p[0] - WORDS) ** 2).sum(axis=1)
+    width = 3.0 * 0.5
+    expected = np.exp(-d2 / (2 * width**2))
+    assert np.allclose(theta[0], expected / expected.sum())
+    with pytest.raises(ValueError, match=r"^unknown quantisation mode 'fuzzy'; use 'hard' or 'soft'$"):
+        vocab.quantize(p, EncodeParams(mode="fuzzy"))
+
+
+def test_a_fused_vector_has_as_many_dna_values_as_the_scales():
+    plain = Vocabulary(WORDS, run="run5", sigma=0.5)
+    two = [
+        description(clusters(0, 4), eigenvalues=[0.0, 2.0, 3.0]),
+        description(clusters(1, 4) + 0.5, eigenvalues=[0.0, 1.0]),
+    ]
+    fused = plain.with_fusion(two)
+    assert fused.encode(two[0]).shape == (fused.dimension(),) == (4,)
+
+
+def test_params_dict_is_every_encode_setting():
+    assert params_dict(EncodeParams(mode="soft", sigma_scale=2.0)) == {
+        "mode": "soft",
+        "sigma_scale": 2.0,
+        "keypoints_only": False,
+        "area_weighted": False,
+        "normalize": True,
+        "fusion": True,
+    }
