@@ -218,3 +218,13 @@ def test_params_dict_is_every_encode_setting():
         "normalize": True,
         "fusion": True,
     }
+
+
+def test_fit_features_default_seed_and_distinct_at_12_decimals():
+    feats = np.random.default_rng(8).random((40, 4))
+    assert np.array_equal(
+        Vocabulary.fit_features(feats, size=5).centers, Vocabulary.fit_features(feats, size=5, seed=0).centers
+    )
+    near = np.array([[0.1, 0, 0, 0], [0.1 + 3e-13, 0, 0, 0], [0.5, 0, 0, 0]])  # equal to 12 decimals
+    with pytest.raises(ValueError, match="^2 distinct descriptors cannot make 3 words$"):
+        Vocabulary.fit_features(near, size=3, run="run5")
