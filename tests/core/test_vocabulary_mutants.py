@@ -4,6 +4,7 @@ directory, a session fixture mutmut cannot time per mutant)."""
 
 from __future__ import annotations
 
+import json
 from datetime import datetime
 
 import numpy as np
@@ -158,7 +159,7 @@ def test_fit_defaults_to_64_words_seed_0_and_passes_the_run():
 
 def test_bof_uses_the_vocabulary_run_the_mode_and_float32():
     p = np.array([[0.1, 0, 0, 0], [0.9, 0.2, 0, 0], [0.2, 0.7, 0, 0]])
-    d = description(p, column=0)  # run1 reads columns 0, 20, 40, ... of the 100
+    d = description(p, column=0)  # run1 reads h_95..h_100 (zero here); a run5 read would see p
     run1 = Vocabulary(np.eye(6, dtype=np.float32)[:3], run="run1", sigma=0.5)
     expected = run1.quantize(select(d.hks, "run1")).mean(axis=0)
     assert np.allclose(run1.encode(d), expected)
@@ -228,3 +229,21 @@ def test_fit_features_default_seed_and_distinct_at_12_decimals():
     near = np.array([[0.1, 0, 0, 0], [0.1 + 3e-13, 0, 0, 0], [0.5, 0, 0, 0]])  # equal to 12 decimals
     with pytest.raises(ValueError, match="^2 distinct descriptors cannot make 3 words$"):
         Vocabulary.fit_features(near, size=3, run="run5")
+
+
+def test_save_makes_missing_parents_and_load_keeps_run_dtype_and_checks(tmp_path):
+    vocab = Vocabulary.fit_features(np.random.default_rng(2).random((40, 5)), size=4, run="run2")
+    path = vocab.save(tmp_path / "a" / "b" / "v1")
+    again = Vocabulary.load(path)
+    assert again.run == "run2" and again.centers.dtype == np.float32
+    with pytest.raises(FileExistsError, match=r"v1 exists: vocabularies are immutable$"):
+        vocab.save(path)
+    meta = json.loads((path / "vocabulary.json").read_text())
+    (path / "vocabulary.json").write_text(
+        json.dumps(dict(meta, fusion={"bof": -1.0, "dna": 1.0, "weight": 1.0}))
+    )
+    with pytest.raises(ValueError, match="fusion scales must be positive"):
+        Vocabulary.load(path)  # a broken fusion entry fails at load, not at the first query
+    (path / "vocabulary.json").write_text(json.dumps(dict(meta, size=5)))
+    with pytest.raises(ValueError, match=r"is inconsistent: centers \(4, 5\)$"):
+        Vocabulary.load(path)
