@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+import pytest
+
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
 
@@ -79,3 +81,8 @@ def test_live_workers_counts_heartbeats_within_the_window_inclusive(db, monkeypa
     jobs_repo.forget_worker(db, "new")
     with db.read() as conn:
         assert jobs_repo.live_workers(conn, within_s=60.0) == 1
+
+
+def test_an_unknown_job_kind_is_refused_in_words(db):
+    with db.write() as conn, pytest.raises(ValueError, match="^unknown job kind 'reindex'$"):
+        jobs_repo.enqueue(conn, "reindex")
