@@ -7,11 +7,13 @@ from __future__ import annotations
 import asyncio
 import json
 import re
+from pathlib import Path
 
 import pytest
 
 from app.api import limits
 from app.api.uploads import UploadForm
+from app.core.meshdata import UnsupportedFormatError
 from app.services.errors import InvalidInputError
 
 Message = dict
@@ -261,3 +263,34 @@ def test_drain_edges_exactly_full_and_no_more_body_key():
         return {"type": "http.request", "body": b"x"}
 
     assert asyncio.run(guard._drain(one_message_without_more_body)) is True
+
+
+def test_a_long_file_name_is_refused_naming_the_limit_and_the_format_is_the_extension():
+    with pytest.raises(InvalidInputError, match="^the file name is longer than 255 characters$"):
+        limits.check_filename("x" * 252 + ".obj")
+    assert limits.upload_format("Chair.OBJ") == "obj"
+    with pytest.raises(UnsupportedFormatError):
+        limits.upload_format("chair.docx")
+
+
+def test_other_scopes_pass_through_the_guard_untouched():
+    seen = []
+
+    async def app(scope, receive, send):
+        seen.append(scope)
+
+    scope = {"type": "lifespan"}
+    asyncio.run(limits.GuardUploads(app, max_concurrent=1, timeout_s=5)(scope, None, None))
+    assert seen == [scope] and seen[0] is scope
+
+
+def test_the_data_dir_check_accepts_an_existing_dir_and_probes_the_dir_itself(tmp_path):
+    limits.check_data_dir(tmp_path)
+    limits.check_data_dir(tmp_path)  # existing: fine, twice
+    assert list(tmp_path.iterdir()) == []
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    with pytest.raises(ValueError, match=rf"^cannot use the data directory {blocker}/sub: Not a directory$"):
+        limits.check_data_dir(blocker / "sub")
+    with pytest.raises(ValueError, match="^cannot use the data directory /proc: "):
+        limits.check_data_dir(Path("/proc"))  # no file can be made there, even as root
