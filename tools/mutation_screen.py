@@ -11,7 +11,9 @@ test files, quickest first (tools/mutmut_fastest_first), with `-x` and a wall-cl
 Recorded in the module's .meta, as mutmut would: a test failed -> 1 (killed); all passed -> 0
 (survived: conservative, a slower test left out might have killed it; docs/testing.md lists which
 mutants were screened and with which files). A run past the limit or a crash is not recorded (left
-for `make mutate`). Only mutants without a result are run, unless --rerun. Run `make mutate` (or
+for `make mutate`), unless --timeouts-killed: then a run past the limit is recorded as a timeout
+(-24), which mutmut and tools/mutation_report.py count as killed (use a limit well above the named
+tests' own time). Only mutants without a result are run, unless --rerun. Run `make mutate` (or
 `mutmut run`) once first: it generates mutants/ and copies the tests; this copies tests/ and
 tools/ again so new test files are seen.
 """
@@ -93,6 +95,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tests", nargs="+", required=True)
     parser.add_argument("--limit", type=float, default=120.0, help="wall-clock seconds per mutant")
     parser.add_argument("--rerun", action="store_true", help="run mutants that already have a result")
+    parser.add_argument(
+        "--timeouts-killed",
+        action="store_true",
+        help="record a run past --limit as a timeout (-24, counted as killed, as mutmut does)",
+    )
     args, extra = parser.parse_known_args(argv)  # unknown options (--deselect=...) go to pytest
     args.tests += extra
     where = metas()
@@ -124,6 +131,10 @@ def main(argv: list[str] | None = None) -> int:
                 record(where[name], name, 0, seconds)
                 counts["survived"] += 1
                 print(f"survived  {name}", flush=True)
+            elif code is None and args.timeouts_killed:
+                record(where[name], name, -24, seconds)
+                counts["killed"] += 1
+                print(f"timeout   {name} (recorded as a timeout)", flush=True)
             else:
                 counts["not recorded"] += 1
                 print(f"{'timeout' if code is None else f'exit {code}':9} {name} (not recorded)", flush=True)
