@@ -36,15 +36,20 @@ class DescribeParams:
     # smoothed (docs/results.md)
     time_range: str = "spectrum"
     target_vertices: int = 1000  # canonical resolution; 0 keeps the input resolution
-    smoothing: int = 40  # Taubin λ|μ iterations at the canonical resolution; 0 = none
-    # uniform (resolution.smooth) or cotangent (intrinsic, app.core.smoothing). Uniform is the only
-    # setting measured that holds on the triangulation and the noise variants of SHREC'11: no
-    # smoothing loses 31 and 6 points there, cotangent weights 23 and 5 (docs/results.md, "Defaults
-    # across datasets"); it is kept until a dataset where it loses can be measured here
+    # Taubin λ|μ iterations at the canonical resolution; 0 = none. 10 with the intrinsic Laplacian:
+    # within 0.7 points of clean on SHREC'11's triangulation variant and 1.5 under noise (fused),
+    # where 40 (the old default) costs 2.0 and 2.6 points on smooth shapes (synthetic corpus); a
+    # quarter of the smoothing that cost 6-8 points on decimated scans (docs/results.md, "Intrinsic
+    # Laplacian")
+    smoothing: int = 10
+    # uniform (resolution.smooth) or cotangent (app.core.smoothing). Cotangent weights lose 23 and 5
+    # points on the triangulation and noise variants where uniform weights hold (docs/results.md)
     smoothing_weights: str = "uniform"
-    # cotangent (the paper's) | intrinsic (cotangent weights of the intrinsic Delaunay triangulation)
-    laplacian: str = "cotangent"
-    # isotropic remeshing at the canonical resolution (app.core.remeshing): the same surface, evenly sampled
+    # intrinsic (cotangent weights of the intrinsic Delaunay triangulation: the same operator on a
+    # Delaunay mesh, far less dependent on the triangulation elsewhere) | cotangent (the paper's)
+    laplacian: str = "intrinsic"
+    # isotropic remeshing at the canonical resolution (app.core.remeshing): triangulation-proof, but it
+    # spends vertices on the area that noise adds (noise variant: -23 points); an option
     remesh: bool = False
     subdivision: str = "midpoint"  # how coarse meshes reach the canonical resolution: midpoint | loop
     solver: str = "auto"  # auto | dense | sparse
@@ -129,10 +134,12 @@ def describe_filters(
     clock = _Clock()
     # resampling and smoothing are scale-free: one normalisation, after them, gives unit area
     fine = to_resolution(mesh, params.target_vertices, subdivision=params.subdivision)
-    if params.remesh:
-        fine = isotropic_remesh(fine, params.target_vertices)
     smoothed = (cotangent_taubin(fine, params.smoothing) if params.smoothing_weights == "cotangent"
                 else smooth(fine, params.smoothing))
+    # remeshing after smoothing: an even sampling of a noisy surface spends its vertices on the
+    # noise's extra area (SHREC'11 noise variant: -23 points when remeshed first)
+    if params.remesh:
+        smoothed = isotropic_remesh(smoothed, params.target_vertices)
     work = normalize_scale(smoothed)
     clock.lap("resample")
     stiffness, mass = laplacian(work.vertices, work.faces, params.laplacian)

@@ -70,7 +70,7 @@ def test_scales_round_trip_and_validation():
 
 
 def test_dna_of_a_description_is_scale_invariant_and_equals_the_mesh_shape_dna(ellipsoid_mesh: Mesh):
-    params = DescribeParams(k=40, m=20, target_vertices=0, smoothing=0)
+    params = DescribeParams(k=40, m=20, target_vertices=0, smoothing=0, laplacian="cotangent")
     base = dna_vector(describe(ellipsoid_mesh, params), 30)
     scaled = Mesh(ellipsoid_mesh.vertices * 7.5 + 3.0, ellipsoid_mesh.faces)
     assert np.allclose(dna_vector(describe(scaled, params), 30), base, rtol=1e-6)

@@ -288,8 +288,10 @@ def test_fusion_rows(folder: Path, tmp_path: Path) -> None:
     assert names == ["run5", "run5 [noise 0.01]", "run5 + 0 DNA", "run5 + 0 DNA [noise 0.01]",
                      "run5 + 1 DNA", "run5 + 1 DNA [noise 0.01]"]
     plain, zero, fused = result.rows[0], result.rows[2], result.rows[4]
-    # weight 0: the fused distance is the BoF distance over a constant, the same ranking
-    assert zero.scores == pytest.approx(plain.scores)
+    # weight 0: the fused distance is the BoF distance over a constant, the same ranking up to the
+    # rounding of the L1 sum of scaled terms, which can flip an exact tie between two BoF distances
+    # (one swapped pair in this small folder moves a score by under 0.01)
+    assert zero.scores == pytest.approx(plain.scores, abs=0.01)
     # d is the descriptor's (Run 5: 4); the vectors ranked are the words plus the Shape-DNA
     assert zero.d == fused.d == plain.d == 4
     assert fused.details["vector_length"] == plain.details["vector_length"] + 30 == 8 + 30
