@@ -294,3 +294,30 @@ def test_the_data_dir_check_accepts_an_existing_dir_and_probes_the_dir_itself(tm
         limits.check_data_dir(blocker / "sub")
     with pytest.raises(ValueError, match="^cannot use the data directory /proc: "):
         limits.check_data_dir(Path("/proc"))  # no file can be made there, even as root
+
+
+def test_the_415_says_why_and_a_plain_body_reaches_the_app_on_the_same_wire():
+    wire = Wire([])
+    asyncio.run(
+        limits.RefuseEncodedBodies(_echo_app)(
+            _scope(headers=[(b"content-encoding", b"br")]), wire.receive, wire.send
+        )
+    )
+    assert (
+        wire.response()[2]["error"]["message"]
+        == "compressed request bodies are not accepted: send the file as is"
+    )
+    for middleware in (
+        limits.RefuseEncodedBodies,
+        lambda app: limits.GuardUploads(app, max_concurrent=1, timeout_s=5),
+    ):
+        seen = []
+
+        async def app(scope, receive, send, seen=seen):
+            seen.append(scope)
+            await _echo_app(scope, receive, send)
+
+        scope, wire = _scope(), Wire([b"abc", b"de"])
+        asyncio.run(middleware(app)(scope, wire.receive, wire.send))
+        assert seen == [scope] and seen[0] is scope
+        assert wire.response()[0] == 200 and wire.response()[2]["error"]["message"] == "5"
