@@ -110,7 +110,8 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
         if name in RUNS:
             bof = [Row(name, "bof", base, name)]
         elif name == "paper":
-            paper = replace(base, target_vertices=0, smoothing=0, time_range="spectrum")
+            paper = replace(base, target_vertices=0, smoothing=0, time_range="spectrum",
+                            laplacian="cotangent", remesh=False)
             bof = [Row(name, "bof", paper, "run5")]
         else:
             rows.append(Row(name, name, base))

@@ -329,3 +329,13 @@ def test_command_passes_the_new_flags(folder: Path, tmp_path: Path, monkeypatch:
     bad = parser.parse_args(["evaluate", str(folder), "--fusion", "heavy"])
     with pytest.raises(CommandError, match="--fusion"):
         bad.func(bad)
+
+
+def test_paper_preset_is_the_papers_method(folder: Path, tmp_path: Path) -> None:
+    # the raw resolution, no smoothing, the computed t_min and the cotangent Laplacian, whatever the defaults
+    result = evaluate(folder, _options(tmp_path / "cache", rows=("paper",)))
+    describe = result.rows[0].details["describe"]
+    wanted = ("laplacian=cotangent", "remesh=False", "smoothing=0", "target_vertices=0",
+              "time_range=spectrum")
+    for part in wanted:
+        assert part in describe.split(";"), (part, describe)
