@@ -25,6 +25,8 @@ def test_a_vertex_in_no_face_still_has_its_row_and_zero_mass():
     assert abs(L[n]).sum() == 0 and M.diagonal()[n] == 0
     L0, M0 = cotangent_laplacian(v, f)
     assert abs(L[:n, :n] - L0).max() == 0 and np.array_equal(M.diagonal()[:n], M0.diagonal())
+    Li, Mi = intrinsic_delaunay_laplacian(extra, f)
+    assert Li.shape == Mi.shape == (n + 1, n + 1) and Mi.diagonal()[n] == 0
 
 
 def test_laplacian_by_name():
