@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 from app.core.mesh import Mesh
-from app.core.remeshing import isotropic_remesh
+from app.core.remeshing import edge_length, isotropic_remesh
 
 
 def _sphere(radius: float = 1.0) -> Mesh:
@@ -57,3 +57,27 @@ def test_a_vertex_count_at_either_end_of_the_band_is_accepted(monkeypatch, targe
     out = isotropic_remesh(_sphere(), target)
     assert out.n_vertices == 162
     assert np.array_equal(out.vertices, fixed.vertices)
+
+
+@pytest.mark.parametrize("fraction, kept", [(1.1e-3, True), (0.9e-3, False)])
+def test_a_face_is_a_sliver_below_one_thousandth_of_the_target_triangle(monkeypatch, fraction, kept):
+    # face 0 of the remesher's output split at p: (a, b, p) gets `fraction` of the target triangle
+    def split(real, v, f, kw):
+        v2, f2 = real(v, f, **kw)
+        a, b, c = f2[0]
+        tri = np.linalg.norm(np.cross(v2[b] - v2[a], v2[c] - v2[a])) / 2
+        w = fraction * np.sqrt(3.0) / 4.0 * kw["h"] ** 2 / tri
+        p = (1 - w) / 2 * (v2[a] + v2[b]) + w * v2[c]
+        n = len(v2)
+        return np.vstack([v2, p]), np.vstack([f2[1:], np.array([[a, b, n], [b, c, n], [c, a, n]], f2.dtype)])
+
+    _patched(monkeypatch, split)
+    mesh = _sphere()
+    out = isotropic_remesh(mesh, 300)
+    assert out is not mesh
+    sliver = fraction * np.sqrt(3.0) / 4.0 * edge_length(mesh.area(), 300) ** 2
+    smallest = out.face_areas().min()
+    if kept:
+        assert smallest == pytest.approx(sliver, rel=1e-6)
+    else:
+        assert smallest > sliver / fraction * 1e-3  # nothing under the threshold is left
