@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from app.core.meshdata import Mesh
+
 LAPLACIANS = ("cotangent", "intrinsic")
 # edge lengths are padded by this fraction of the mean edge length before the intrinsic flips, so a
 # zero-area triangle (common after decimation) gets finite cotangents (Sharp & Crane 2020, §4.5)
@@ -79,8 +81,7 @@ def intrinsic_delaunay_laplacian(vertices: np.ndarray, faces: np.ndarray) -> Ope
     # the mass stays the input's barycentric lumping (the same quadrature of the same surface): the
     # intrinsic triangulation can leave a vertex between slivers only, with 1e-6 of the mean mass,
     # and such a vertex made λ_0 come out at 2e-3 instead of 0 on a decimated SHREC'11 mesh
-    tri = vertices[faces]
-    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    areas = Mesh(vertices, faces).face_areas()
     return sp.csr_matrix(stiffness), lumped_mass(vertices.shape[0], faces, areas)
 
 

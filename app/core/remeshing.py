@@ -20,14 +20,9 @@ import warnings
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.csgraph  # noqa: F401  (sp.csgraph)
+from scipy.sparse.csgraph import connected_components
 
 from app.core.mesh import InvalidMeshError, Mesh, clean
-
-with warnings.catch_warnings():  # its package import uses deprecated numpy/scipy paths (0.3.8)
-    warnings.simplefilter("ignore", DeprecationWarning)
-    # loaded with the module (~0.3 s, once per process), not inside the first describe's timing
-    import gpytoolbox
 
 ITERATIONS = 10  # Botsch & Kobbelt's split/collapse/flip/relax rounds; 5 leave visible valence defects
 # a result outside these bounds (vertex count against the target, area against the input) means the
@@ -59,6 +54,10 @@ def isotropic_remesh(mesh: Mesh, target_vertices: int, iterations: int = ITERATI
     if not np.isfinite(area) or area <= 0:
         return mesh
     h = edge_length(area, target_vertices)
+    # imported here, not with the module: remeshing is an option, and the package costs ~0.3 s to load
+    with warnings.catch_warnings():  # its import uses deprecated numpy/scipy paths (0.3.8)
+        warnings.simplefilter("ignore", DeprecationWarning)
+        import gpytoolbox
     try:
         v, f = gpytoolbox.remesh_botsch(
             np.ascontiguousarray(mesh.vertices, dtype=np.float64),
@@ -109,5 +108,5 @@ def remeshable(mesh: Mesh) -> bool:
     corners = faces.size
     graph = sp.coo_matrix((np.ones(2 * h1.size), (np.concatenate([h1, nxt]), np.concatenate([nxt2, h2]))),
                           shape=(corners, corners))
-    fans, _ = sp.csgraph.connected_components(graph, directed=False)
+    fans, _ = connected_components(graph, directed=False)
     return bool(fans == np.unique(faces).size)

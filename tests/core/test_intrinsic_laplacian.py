@@ -47,15 +47,6 @@ def test_flips_a_non_delaunay_edge_and_keeps_weights_nonnegative():
     assert np.isclose(Mi.diagonal().sum(), 0.2, rtol=1e-4)  # the same surface: area unchanged
 
 
-def test_rows_sum_to_zero_symmetric_psd_and_mass_is_area(shrec_mesh):
-    L, M = intrinsic_delaunay_laplacian(shrec_mesh.vertices, shrec_mesh.faces)
-    assert np.allclose(np.asarray(L.sum(axis=1)).ravel(), 0.0, atol=1e-9)
-    assert abs(L - L.T).max() < 1e-12
-    eig = np.linalg.eigvalsh(L.toarray())
-    assert eig.min() > -1e-9 * eig.max()
-    assert np.isclose(M.diagonal().sum(), shrec_mesh.area(), rtol=1e-4)
-
-
 def test_dirichlet_energy_of_linear_function_is_area_on_a_plane():
     # linear precision: on a flat patch ∫|∇x|² = area, whatever the intrinsic triangulation
     v, f = _plane()

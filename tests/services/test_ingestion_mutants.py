@@ -123,14 +123,7 @@ def test_identical_content_of_a_failed_model_queues_it_again_with_its_own_file(c
 
 def test_a_mesh_removed_after_put_mesh_is_written_again(ctx, monkeypatch):
     """A delete of the same content may remove the file between put_mesh and the lock."""
-    put = ctx.blobs.put_mesh
-
-    def put_then_lost(data, file_type):
-        digest, path = put(data, file_type)
-        path.unlink()
-        return digest, path
-
-    monkeypatch.setattr(ctx.blobs, "put_mesh", put_then_lost)
+    _lose_the_put_file(ctx, monkeypatch)
     s = ingestion.submit(ctx, TETRA, "a.obj")
     assert ctx.blobs.mesh_path(s.model.sha256, "obj").read_bytes() == TETRA
 
