@@ -11,11 +11,14 @@ import os
 import shutil
 import socket
 import subprocess
+import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
+import httpx
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
@@ -183,3 +186,27 @@ def stack(docker_env: dict[str, str]) -> Iterator[Compose]:
         )
         left = compose.volumes()
         assert not left, f"`docker compose down -v` left volumes behind: {left}"
+
+
+def wait_for(
+    what: str,
+    probe: Callable[[], Any],
+    timeout: float,
+    compose: Compose,
+    every: float = 1.0,
+    retry_on: tuple[type[BaseException], ...] = (httpx.HTTPError,),
+) -> Any:
+    """Poll `probe` until it returns something truthy; fail with `what`, the last value and the logs.
+    An exception in `retry_on` (an api restarting) counts as "not yet" until the deadline."""
+    deadline = time.monotonic() + timeout
+    last: Any = None
+    while time.monotonic() < deadline:
+        try:
+            last = probe()
+        except retry_on as exc:
+            last = f"{type(exc).__name__}: {exc}"
+        else:
+            if last:
+                return last
+        time.sleep(every)
+    pytest.fail(f"timed out after {timeout:.0f} s waiting for {what}; last: {last!r}\n{compose.logs()}")

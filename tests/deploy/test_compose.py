@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING, Any
 import httpx
 import pytest
 
+from tests.deploy.conftest import wait_for
+
 if TYPE_CHECKING:  # conftest is pytest's to import; at runtime the fixture hands the object over
     from tests.deploy.conftest import Compose
 
@@ -50,24 +52,6 @@ def meshes(n: int) -> list[tuple[str, str, bytes]]:
     return [
         (f"prim{i}.obj", f"prim{i}", m.export(file_type="obj").encode()) for i, m in enumerate(shapes[:n])
     ]
-
-
-def wait_for(
-    what: str, probe: Callable[[], Any], timeout: float, compose: Compose, every: float = 1.0
-) -> Any:
-    """Poll `probe` until it returns something truthy; fail with `what`, the last value and the logs."""
-    deadline = time.monotonic() + timeout
-    last: Any = None
-    while time.monotonic() < deadline:
-        try:
-            last = probe()
-        except httpx.HTTPError as exc:  # the api restarting: keep trying until the deadline
-            last = f"{type(exc).__name__}: {exc}"
-        else:
-            if last:
-                return last
-        time.sleep(every)
-    pytest.fail(f"timed out after {timeout:.0f} s waiting for {what}; last: {last!r}\n{compose.logs()}")
 
 
 def upload(client: httpx.Client, name: str, label: str, data: bytes) -> dict[str, Any]:

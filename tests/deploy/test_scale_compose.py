@@ -26,6 +26,8 @@ from typing import TYPE_CHECKING, Any
 import httpx
 import pytest
 
+from tests.deploy.conftest import wait_for as _wait_for
+
 if TYPE_CHECKING:
     from tests.deploy.conftest import Compose
 
@@ -64,23 +66,10 @@ def shrec(n: int, skip: int = 0) -> list[tuple[str, str, bytes]]:
     return out[skip : skip + n]
 
 
-def wait_for(
-    what: str, probe: Callable[[], Any], timeout: float, compose: Compose, every: float = 1.0
-) -> Any:
-    deadline = time.monotonic() + timeout
-    last: Any = None
-    while time.monotonic() < deadline:
-        try:
-            last = probe()
-        except (httpx.HTTPError, subprocess.SubprocessError, ValueError, KeyError) as exc:
-            last = repr(exc)
-        else:
-            if last:
-                return last
-        time.sleep(every)
-    raise AssertionError(
-        f"timed out after {timeout:.0f} s waiting for {what}; last: {last!r}\n{compose.logs()}"
-    )
+def wait_for(what: str, probe: Callable[[], Any], timeout: float, compose: Compose, every: float = 1) -> Any:
+    """conftest.wait_for, also waiting out docker exec / psql failures while a container restarts."""
+    return _wait_for(what, probe, timeout, compose, every,
+                     retry_on=(httpx.HTTPError, subprocess.SubprocessError, ValueError, KeyError))
 
 
 @pytest.fixture
