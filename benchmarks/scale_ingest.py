@@ -15,7 +15,6 @@ from __future__ import annotations
 import csv
 import multiprocessing
 import os
-import socket
 import statistics
 import subprocess
 import sys
@@ -93,18 +92,14 @@ def ingest_once(data_dir: Path, url: str, files: list[tuple[Path, str]], workers
     return {"workers": workers, "meshes": len(files), "seconds": seconds, "meshes/s": len(files) / seconds}
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def search_latency(
     data_dir: Path, url: str, queries: list[Path], processes: int, clients: int, models: int
 ) -> dict:
     import httpx
 
-    port = _free_port()
+    from benchmarks.service import free_port, stop_server
+
+    port = free_port()
     base = f"http://127.0.0.1:{port}"
     env = {
         **os.environ,
@@ -167,8 +162,7 @@ def search_latency(
             lat = sorted(pool.map(one, queries))
         wall = time.perf_counter() - t
     finally:
-        proc.terminate()
-        proc.wait(timeout=60)
+        stop_server(proc)
     q = statistics.quantiles(lat, n=20)
     return {
         "api processes": processes,
