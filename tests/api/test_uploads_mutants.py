@@ -7,12 +7,10 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from starlette.requests import Request
 
 from app.api.uploads import MAX_FIELD_BYTES, multipart_body, read_form
 from app.services.errors import InvalidInputError, PayloadTooLargeError
-
-BOUNDARY = "xYzZy"
+from tests.api.test_uploads import BOUNDARY, _request
 
 
 def _part(headers: list[bytes], content: bytes) -> bytes:
@@ -39,22 +37,8 @@ def _end(*parts: bytes) -> bytes:
 
 def _read(body: bytes, max_bytes: int = 10_000, chunk: int = 7, headers: dict | None = None):
     """read_form over a body sent in `chunk`-byte pieces (parts and headers split across chunks)."""
-    chunks = [body[i : i + chunk] for i in range(0, len(body), chunk)] or [b""]
-    sent: list[int] = []
-
-    async def receive():
-        i = len(sent)
-        sent.append(i)
-        return {"type": "http.request", "body": chunks[i], "more_body": i + 1 < len(chunks)}
-
-    hdrs = {"content-type": f"multipart/form-data; boundary={BOUNDARY}", **(headers or {})}
-    scope = {
-        "type": "http",
-        "method": "POST",
-        "path": "/",
-        "headers": [(k.encode(), v.encode()) for k, v in hdrs.items()],
-    }
-    return asyncio.run(read_form(Request(scope, receive), max_bytes=max_bytes))
+    request, _ = _request(body, chunk=chunk, headers=headers)
+    return asyncio.run(read_form(request, max_bytes=max_bytes))
 
 
 def test_parts_headers_and_contents_are_kept_apart():
