@@ -247,3 +247,40 @@ def test_save_makes_missing_parents_and_load_keeps_run_dtype_and_checks(tmp_path
     (path / "vocabulary.json").write_text(json.dumps(dict(meta, size=5)))
     with pytest.raises(ValueError, match=r"is inconsistent: centers \(4, 5\)$"):
         Vocabulary.load(path)
+
+
+def test_float32_features_are_clustered_in_float64():
+    feats = np.random.default_rng(11).random((60, 4)).astype(np.float32)
+    a = Vocabulary.fit_features(feats, size=5)
+    b = Vocabulary.fit_features(feats.astype(np.float64), size=5)
+    np.testing.assert_array_equal(a.centers, b.centers)
+    assert a.sigma == b.sigma and a.metadata["inertia"] == b.metadata["inertia"]
+
+
+def test_squared_distances_are_taken_in_float64_whatever_the_input_dtype():
+    from app.core.vocabulary import _squared_distances
+
+    rng = np.random.default_rng(12)
+    p, c = rng.random((50, 4)).astype(np.float32), rng.random((7, 4)).astype(np.float32)
+    np.testing.assert_array_equal(
+        _squared_distances(p, c), _squared_distances(p.astype(np.float64), c.astype(np.float64))
+    )
+
+
+def test_save_writes_beside_the_target_under_a_hidden_name_then_renames(tmp_path, monkeypatch):
+    import os
+
+    renames: list[tuple[str, str]] = []
+    real = os.rename
+
+    def spy(src, dst):
+        renames.append((str(src), str(dst)))
+        real(src, dst)
+
+    monkeypatch.setattr(os, "rename", spy)
+    vocab = Vocabulary(centers=WORDS, run="run5")
+    path = vocab.save(tmp_path / "vocabularies" / "v7")
+    [(src, dst)] = renames
+    assert dst == str(path)
+    assert os.path.dirname(src) == str(tmp_path / "vocabularies")  # the same directory: an atomic rename
+    assert os.path.basename(src).startswith(".v7.")  # hidden while incomplete

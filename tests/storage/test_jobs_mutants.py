@@ -1,6 +1,7 @@
 """Job-queue functions the mutation pass found untested by the fast suite (issue 15): the latest job
 of a model, a failure's record, a release for retry, and the live-worker count at its time boundary.
-On SQLite and PostgreSQL through tests/storage/conftest.py's `db`."""
+On SQLite and PostgreSQL through tests/storage/conftest.py's `db`; the claim also on SQLite with
+rows that answer only to their exact column names, as PostgreSQL's do."""
 
 from __future__ import annotations
 
@@ -10,6 +11,8 @@ import pytest
 
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
+from app.storage.db import Database
+from app.storage.postgres import Row
 
 
 def _model(db, n: int) -> int:
@@ -86,3 +89,36 @@ def test_live_workers_counts_heartbeats_within_the_window_inclusive(db, monkeypa
 def test_an_unknown_job_kind_is_refused_in_words(db):
     with db.write() as conn, pytest.raises(ValueError, match="^unknown job kind 'reindex'$"):
         jobs_repo.enqueue(conn, "reindex")
+
+
+class _ExactNameRows(Database):
+    """SQLite whose rows answer only to their exact column names, as PostgreSQL's (postgres.Row) do:
+    sqlite3.Row would also answer row["ID"]."""
+
+    def _open(self):
+        conn = super()._open()
+        conn.row_factory = lambda cursor, values: Row(values, [c[0] for c in cursor.description])
+        return conn
+
+
+def test_claim_reads_its_rows_by_their_exact_column_names(tmp_path, monkeypatch):
+    clock = {"now": 1_000_000.0}
+    monkeypatch.setattr(jobs_repo, "time", SimpleNamespace(time=lambda: clock["now"]))
+    db = _ExactNameRows(tmp_path / "shapebag.db")
+    db.migrate()
+    model = _model(db, 1)
+    with db.write() as conn:
+        spent = jobs_repo.enqueue(conn, "ingest", model_id=model)
+    first = jobs_repo.claim(db, "w1", lease_seconds=10, max_attempts=1)
+    assert first is not None and first.id == spent and first.worker == "w1"
+    with db.write() as conn:
+        fresh = jobs_repo.enqueue(conn, "ingest", model_id=model)
+    clock["now"] += 60.0  # w1's lease expired with its one attempt spent
+    second = jobs_repo.claim(db, "w2", lease_seconds=10, max_attempts=1)
+    assert second is not None and second.id == fresh and second.worker == "w2" and second.attempts == 1
+    with db.read() as conn:
+        given_up = jobs_repo.get(conn, spent)
+        failed = models_repo.get(conn, model)
+    assert given_up is not None and given_up.state == "failed"
+    assert given_up.error == "gave up after 1 attempts: its worker stopped (lease expired)"
+    assert failed is not None and failed.status == "failed" and failed.error == given_up.error
