@@ -212,3 +212,48 @@ def test_taubin_steps_on_a_tetrahedron_scale_the_offsets_from_the_centroid():
     two = resolution.smooth(Mesh(v, f), 2)
     factor = (1 - 4 * 0.5 / 3) * (1 + 4 * 0.53 / 3)
     np.testing.assert_allclose(two.vertices - centre, (v - centre) * factor, atol=1e-12)
+
+
+def _icosahedron() -> Mesh:
+    import trimesh
+
+    ico = trimesh.creation.icosahedron()
+    return Mesh(np.asarray(ico.vertices, np.float64), np.asarray(ico.faces, np.int64))
+
+
+@pytest.mark.parametrize("target", [18, 8])  # 12 x 1.5 == 18 and 8 x 1.5 == 12: the band's two ends
+def test_a_mesh_at_either_end_of_the_band_is_left_as_it_is(target):
+    ico = _icosahedron()
+    assert resolution.to_resolution(ico, target) is ico
+
+
+def test_a_mesh_just_below_the_band_is_subdivided_at_edge_midpoints():
+    ico = _icosahedron()
+    out = resolution.to_resolution(ico, 28)  # 12 x 1.5 < 28; 42 == 28 x 1.5, kept
+    assert out.n_vertices == 42  # 12 + 30 edge midpoints, on the icosahedron's faces
+    np.testing.assert_array_equal(out.vertices[:12], ico.vertices)
+
+
+def test_a_target_of_zero_or_less_leaves_the_mesh_alone():
+    ico = _icosahedron()
+    assert resolution.to_resolution(ico, 0) is ico
+    assert resolution.to_resolution(ico, -5) is ico
+
+
+@pytest.mark.parametrize(("target", "tolerance"), [(1, 1.5), (4, 2.0)])
+def test_a_fine_mesh_is_simplified_with_the_target_and_tolerance_given(monkeypatch, target, tolerance):
+    calls = []
+
+    def spy(mesh, target_vertices, tol=1.5):
+        calls.append((mesh.n_vertices, target_vertices, tol))
+        return mesh
+
+    monkeypatch.setattr(resolution, "simplify", spy)
+    resolution.to_resolution(_icosahedron(), target, tolerance=tolerance)
+    assert calls == [(12, target, tolerance)]
+
+
+def test_an_unknown_subdivision_is_refused_with_the_known_ones():
+    with pytest.raises(ValueError) as info:
+        resolution.to_resolution(_icosahedron(), 100, subdivision="butterfly")
+    assert str(info.value) == "subdivision must be one of midpoint, loop, not 'butterfly'"
