@@ -16,8 +16,11 @@ def _description(seed: int, n: int = 200, m: int = 100) -> ShapeDescription:
     keypoints = np.zeros(n, bool)
     keypoints[rng.choice(n, 15, replace=False)] = True
     return ShapeDescription(
-        hks=rng.random((n, m)).astype(np.float32), weights=rng.random(n).astype(np.float32),
-        keypoints=keypoints, eigenvalues=np.arange(40, dtype=np.float64), input_vertices=n,
+        hks=rng.random((n, m)).astype(np.float32),
+        weights=rng.random(n).astype(np.float32),
+        keypoints=keypoints,
+        eigenvalues=np.arange(40, dtype=np.float64),
+        input_vertices=n,
     )
 
 
