@@ -12,9 +12,12 @@ import scipy.sparse as sp
 
 from app.core.meshdata import MIN_FACES, MIN_VERTICES, InvalidMeshError, Mesh
 
-# Past these, areas over- or underflow in float64 somewhere downstream (area ~ coordinate^2)
-MAX_COORDINATE = 1e100
-MIN_EXTENT = 1e-100
+# Past these, areas over- or underflow in float64: a triangle's area is the norm of a cross product,
+# computed through its square (~ edge^4), so 1e100 coordinates gave infinite areas and a 1e-80 mesh lost
+# faces to underflow (called degenerate). Within 1e-70..1e70 the squares stay normal doubles even for
+# the 2M-vertex limit's short edges (extent / 1400).
+MAX_COORDINATE = 1e70
+MIN_EXTENT = 1e-70
 WELD_TOLERANCE = 1e-8  # fraction of the largest bounding-box side
 DEGENERATE_AREA = 1e-14  # fraction of the squared largest side
 DEBRIS_FRACTION = 0.01  # fraction of the largest component's area

@@ -156,3 +156,84 @@ def test_an_empty_vertex_array_is_refused_as_no_vertices():
     with pytest.raises(InvalidMeshError) as info:
         cleaning.validate(np.zeros((0, 3)), np.array([[0, 1, 2]]))
     assert str(info.value) == "the mesh has no vertices"
+
+
+def _tetra_scaled(scale: float) -> np.ndarray:
+    return TETRA * scale
+
+
+@pytest.mark.parametrize(
+    ("vertices", "faces", "message"),
+    [
+        (np.zeros((4, 2)), TETRA_FACES, "the mesh has no vertices"),
+        (np.zeros((4, 3, 1)), TETRA_FACES, "the mesh has no vertices"),
+        (TETRA, np.zeros((0, 3), np.int64), "the mesh has no faces (a point cloud is not a surface)"),
+        (TETRA, np.array([[0, 1, 2, 3]]), "faces must be triangles"),
+        (TETRA, np.array([0, 1, 2]), "faces must be triangles"),
+        (
+            np.vstack([TETRA[:3], [[np.nan, 0, 0]]]),
+            TETRA_FACES,
+            "the mesh has non-finite vertex coordinates (NaN or infinity)",
+        ),
+        (
+            np.vstack([TETRA[:3], [[np.inf, 0, 0]]]),
+            TETRA_FACES,
+            "the mesh has non-finite vertex coordinates (NaN or infinity)",
+        ),
+        (TETRA, np.array([[0, 1, -1]]), "a face points at a vertex that does not exist"),
+        (TETRA, np.array([[0, 1, 4]]), "a face points at a vertex that does not exist"),
+        (TETRA[:3], np.array([[0, 1, 2]]), "the mesh has too few vertices (3 < 4)"),
+        (
+            _tetra_scaled(2e70),
+            TETRA_FACES,
+            "the coordinates are too large (up to 2e+70; at most 1e+70):"
+            " scale the model down before exporting it",
+        ),
+        (
+            _tetra_scaled(5e-71),
+            TETRA_FACES,
+            "the mesh is too small (it spans 5e-71; at least 1e-70): scale the model up before exporting it",
+        ),
+        (np.ones((4, 3)), TETRA_FACES, "the mesh has zero total area (all faces are degenerate)"),
+    ],
+)
+def test_validate_names_the_first_problem_word_for_word(vertices, faces, message):
+    with pytest.raises(InvalidMeshError) as info:
+        cleaning.validate(vertices, faces)
+    assert str(info.value) == message
+
+
+def test_coordinates_of_exactly_the_bounds_are_accepted():
+    assert cleaning.validate(_tetra_scaled(1e70), TETRA_FACES).n_vertices == 4
+    assert cleaning.validate(_tetra_scaled(1e-70), TETRA_FACES).n_vertices == 4
+
+
+def test_stray_points_do_not_set_the_scale():
+    # a point in no face, far away and huge: the mesh itself is a unit tetrahedron
+    v = np.vstack([TETRA, [[1e200, 0, 0]]])
+    assert cleaning.validate(v, TETRA_FACES).n_vertices == 5
+    tiny = np.vstack([TETRA * 1e-50, [[1.0, 1.0, 1.0]]])  # small faces beside a stray point at 1
+    assert cleaning.validate(tiny, TETRA_FACES).n_vertices == 5
+
+
+@pytest.mark.parametrize("scale", [1e-70, 1e70])
+def test_a_mesh_at_the_coordinate_bounds_cleans_to_the_same_mesh_as_at_unit_scale(scale):
+    # bug fix: the bounds were 1e-100 and 1e100, where areas (through their squares, ~ edge^4)
+    # underflowed (a 1e-80 sphere lost faces as "degenerate", a 1e-90 one was "zero total area") or
+    # overflowed (infinite areas at 1e80)
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(3)
+    unit = cleaning.clean(cleaning.validate(sphere.vertices, sphere.faces))
+    scaled = cleaning.clean(cleaning.validate(sphere.vertices * scale, sphere.faces))
+    np.testing.assert_array_equal(scaled.faces, unit.faces)
+    assert scaled.area() == pytest.approx(unit.area() * scale * scale, rel=1e-12)
+
+
+@pytest.mark.parametrize(("scale", "message"), [(1e-80, "too small"), (1e80, "too large")])
+def test_a_mesh_past_the_bounds_is_refused_with_the_reason(scale, message):
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(3)
+    with pytest.raises(InvalidMeshError, match=message):
+        cleaning.validate(sphere.vertices * scale, sphere.faces)
