@@ -1,0 +1,176 @@
+"""Quadric edge collapse's face budget and vertex clustering's grid, cells, sides and rounds, on
+hand-made meshes (issue 15 mutation pass)."""
+
+from __future__ import annotations
+
+import sys
+import types
+
+import numpy as np
+import pytest
+import trimesh
+
+from app.core import decimation
+from app.core.meshdata import Mesh
+
+
+def _sphere(subdivisions: int = 2) -> Mesh:
+    s = trimesh.creation.icosphere(subdivisions)
+    return Mesh(np.asarray(s.vertices, np.float64), np.asarray(s.faces, np.int64))
+
+
+# --- quadric -------------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def fake_simplifier(monkeypatch):
+    calls = []
+
+    def simplify(vertices, faces, target_count, agg):
+        calls.append((vertices, faces, target_count, agg))
+        return vertices[:4] * 2.0, faces[:2].ravel()  # flat faces, as the library may return them
+
+    monkeypatch.setitem(sys.modules, "fast_simplification", types.SimpleNamespace(simplify=simplify))
+    return calls
+
+
+def test_quadric_asks_for_the_face_count_of_the_target_at_the_mesh_s_faces_per_vertex(fake_simplifier):
+    mesh = _sphere(2)  # 162 vertices, 320 faces
+    out = decimation.quadric(mesh, 50, 3.5)
+    [(v, f, target_count, agg)] = fake_simplifier
+    assert target_count == round(320 * 50 / 162) and agg == 3.5
+    assert v.dtype == np.float64 and v.flags.c_contiguous and f.dtype == np.int32 and f.flags.c_contiguous
+    np.testing.assert_array_equal(v, mesh.vertices)
+    np.testing.assert_array_equal(f, mesh.faces)
+    assert out.vertices.dtype == np.float64 and out.faces.dtype == np.int64 and out.faces.shape == (2, 3)
+    np.testing.assert_array_equal(out.vertices, mesh.vertices[:4] * 2.0)
+
+
+def test_quadric_asks_for_at_least_one_face(fake_simplifier):
+    decimation.quadric(_sphere(2), 0, 3.0)
+    assert fake_simplifier[0][2] == 1
+
+
+def test_quadric_leaves_a_mesh_already_at_or_below_the_budget(fake_simplifier):
+    mesh = _sphere(2)
+    assert decimation.quadric(mesh, 162, 3.0) is mesh  # 320 faces asked: all of them
+    assert decimation.quadric(mesh, 500, 3.0) is mesh
+    assert fake_simplifier == []
+
+
+# --- face and vertex normals ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("chunk", [1, 2, 3, 7, 1 << 18])
+def test_face_normals_by_chunks_are_the_cross_products(chunk):
+    mesh = _sphere(1)
+    v = mesh.vertices[mesh.faces]
+    expected = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    np.testing.assert_allclose(decimation.face_normals(mesh, chunk=chunk), expected, rtol=0, atol=1e-15)
+
+
+def test_vertex_normals_sum_the_normals_of_the_faces_around_each_vertex():
+    mesh = Mesh(np.vstack([_sphere(1).vertices, [[5.0, 5.0, 5.0]]]), _sphere(1).faces)  # one lone vertex
+    fn = decimation.face_normals(mesh)
+    expected = np.zeros((mesh.n_vertices, 3))
+    for face, normal in zip(mesh.faces, fn, strict=True):
+        expected[face] += normal
+    np.testing.assert_allclose(decimation._vertex_normals(mesh, fn), expected, atol=1e-14)
+
+
+# --- cells and clusters --------------------------------------------------------------------------
+
+
+def test_cells_group_the_vertices_of_each_grid_cell_from_the_box_corner():
+    v = np.array(
+        [[0.1, 0.1, 0.1], [0.9, 0.2, 0.3], [1.1, 0.1, 0.1], [0.2, 0.3, 2.5], [1.5, 0.9, 0.0], [0.0, 0.0, 0.0]]
+    ) + [10.0, -4.0, 7.0]
+    lo = v.min(axis=0)
+    labels, first = decimation._cells(v, lo, 1.0)
+    assert labels.dtype == np.int64
+    cells = [tuple(c) for c in np.floor((v - lo) / 1.0).astype(int)]
+    for i in range(len(v)):
+        for j in range(len(v)):
+            assert (labels[i] == labels[j]) == (cells[i] == cells[j])
+    assert sorted(set(labels.tolist())) == list(range(len(first)))
+    for label, index in enumerate(first):
+        assert labels[index] == label and index == np.flatnonzero(labels == label).min()
+
+
+def test_clusters_split_a_cell_by_the_side_its_normals_face():
+    v = np.array([[0.1, 0.1, 0.1], [0.2, 0.2, 0.2], [0.3, 0.1, 0.2], [0.4, 0.4, 0.4], [1.5, 0.5, 0.5]])
+    normals = np.array([[0, 0, 1.0], [0, 0, -1.0], [0, 1.0, 0.1], [0.1, 0, -1.0], [0, 0, -1.0]])
+    labels, count = decimation._clusters(v, v.min(axis=0), 1.0, normals)
+    # cell 0 holds vertices 0-3: 0 and 2 face the way vertex 0 does, 1 and 3 the other way
+    assert count == 3
+    assert labels[0] == labels[2] != labels[1] == labels[3] != labels[4] != labels[0]
+    assert labels.dtype == np.int64 and sorted(set(labels.tolist())) == [0, 1, 2]
+    plain, n = decimation._clusters(v, v.min(axis=0), 1.0, None)
+    assert n == 2 and len(set(plain[:4].tolist())) == 1
+
+
+def test_cluster_moves_each_vertex_to_its_cluster_mean_and_drops_collapsed_faces(monkeypatch):
+    mesh = Mesh(
+        np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [4, 0, 0], [5, 0, 0], [4, 1, 0]], np.float64),
+        np.array([[0, 1, 2], [0, 3, 4], [3, 4, 5], [1, 4, 5], [2, 5, 0]], np.int64),
+    )
+    groups = np.array([0, 1, 1, 2, 2, 3])  # 1 = 2 and 3 = 4
+    monkeypatch.setattr(decimation, "_clusters", lambda v, lo, h, normals: (groups, 4))
+    out = decimation.cluster(mesh, 4)
+    np.testing.assert_allclose(out.vertices, [[0, 0, 0], [0.5, 0.5, 0], [4.5, 0, 0], [4, 1, 0]])
+    # (0,1,1), (0,2,2) and (2,2,3) collapse: a face with a repeated cluster goes, whichever corners
+    np.testing.assert_array_equal(out.faces, [[1, 2, 3], [1, 3, 0]])
+
+
+def test_cluster_corrects_the_cell_size_until_the_count_is_within_0_9_to_1_05_of_the_target(monkeypatch):
+    counts = iter([400, 90, 105, 50])
+    sizes: list[float] = []
+
+    def fake(v, lo, h, normals):
+        sizes.append(h)
+        n = next(counts)
+        return np.arange(len(v)) % n, n
+
+    monkeypatch.setattr(decimation, "_clusters", fake)
+    mesh = _sphere(3)
+    area = mesh.area()
+    decimation.cluster(mesh, 100)
+    assert sizes[0] == pytest.approx(np.sqrt(area / 100))
+    assert sizes[1] == pytest.approx(sizes[0] * 2.0)  # 400 clusters: cells twice as large
+    assert len(sizes) == 2  # 90 is within the band (0.9 x 100 included)
+    sizes.clear()
+    counts = iter([106, 105])
+    decimation.cluster(mesh, 100)
+    assert len(sizes) == 2 and sizes[1] == pytest.approx(sizes[0] * np.sqrt(1.06))  # 105: included
+
+
+def test_cluster_gives_up_correcting_after_the_rounds(monkeypatch):
+    sizes: list[float] = []
+
+    def fake(v, lo, h, normals):
+        sizes.append(h)
+        return np.arange(len(v)) % 10, 10
+
+    monkeypatch.setattr(decimation, "_clusters", fake)
+    decimation.cluster(_sphere(3), 100)
+    assert len(sizes) == 1 + 6
+    sizes.clear()
+    decimation.cluster(_sphere(3), 100, rounds=2)
+    assert len(sizes) == 3
+
+
+def test_cluster_splits_sides_by_default_and_not_when_asked(monkeypatch):
+    seen = []
+
+    def fake(v, lo, h, normals):
+        seen.append((lo, normals))
+        return np.arange(len(v)) % 100, 100
+
+    monkeypatch.setattr(decimation, "_clusters", fake)
+    mesh = Mesh(_sphere(3).vertices + [3.0, -2.0, 1.0], _sphere(3).faces)
+    decimation.cluster(mesh, 100)
+    lo, normals = seen[-1]
+    np.testing.assert_allclose(lo, mesh.vertices.min(axis=0))  # the grid starts at the box corner
+    np.testing.assert_allclose(normals, decimation._vertex_normals(mesh, decimation.face_normals(mesh)))
+    decimation.cluster(mesh, 100, split_sides=False)
+    assert seen[-1][1] is None
