@@ -237,3 +237,16 @@ def test_a_mesh_past_the_bounds_is_refused_with_the_reason(scale, message):
     sphere = trimesh.creation.icosphere(3)
     with pytest.raises(InvalidMeshError, match=message):
         cleaning.validate(sphere.vertices * scale, sphere.faces)
+
+
+def test_too_few_vertices_counts_the_vertices():
+    with pytest.raises(InvalidMeshError) as info:
+        cleaning.validate(TETRA[:2], np.array([[0, 1, 1]]))
+    assert str(info.value) == "the mesh has too few vertices (2 < 4)"
+
+
+@pytest.mark.parametrize("offset", [[0.0, 0.0, -1e-69], [1e-69, 0.0, 0.0]])
+def test_the_extent_is_the_largest_side_of_the_box_not_the_coordinates_spread(offset):
+    # a tetrahedron of side 5e-71 beside the origin: the coordinates spread over 1e-69, its box does not
+    with pytest.raises(InvalidMeshError, match="too small"):
+        cleaning.validate(TETRA * 5e-71 + offset, TETRA_FACES)

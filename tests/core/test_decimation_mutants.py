@@ -81,20 +81,36 @@ def test_vertex_normals_sum_the_normals_of_the_faces_around_each_vertex():
 # --- cells and clusters --------------------------------------------------------------------------
 
 
-def test_cells_group_the_vertices_of_each_grid_cell_from_the_box_corner():
+@pytest.mark.parametrize("h", [1.0, 0.5, 1e-7])  # 1e-7: over 2^62 cells in the box, the row sort
+def test_cells_group_the_vertices_of_each_grid_cell_from_the_box_corner(h):
     v = np.array(
-        [[0.1, 0.1, 0.1], [0.9, 0.2, 0.3], [1.1, 0.1, 0.1], [0.2, 0.3, 2.5], [1.5, 0.9, 0.0], [0.0, 0.0, 0.0]]
+        [
+            [0.1, 0.1, 0.1],
+            [0.9, 0.2, 0.3],
+            [1.1, 0.1, 0.1],
+            [0.2, 0.3, 2.5],
+            [1.5, 0.9, 0.0],
+            [0.0, 0.0, 0.0],
+            [0.2, 0.3, 2.5 + 1e-9],
+        ]
     ) + [10.0, -4.0, 7.0]
     lo = v.min(axis=0)
-    labels, first = decimation._cells(v, lo, 1.0)
-    assert labels.dtype == np.int64
-    cells = [tuple(c) for c in np.floor((v - lo) / 1.0).astype(int)]
+    labels, first = decimation._cells(v, lo, h)
+    assert labels.dtype == np.int64 and labels.shape == (len(v),)
+    cells = [tuple(c) for c in np.floor((v - lo) / h).astype(int)]
     for i in range(len(v)):
         for j in range(len(v)):
             assert (labels[i] == labels[j]) == (cells[i] == cells[j])
     assert sorted(set(labels.tolist())) == list(range(len(first)))
     for label, index in enumerate(first):
         assert labels[index] == label and index == np.flatnonzero(labels == label).min()
+
+
+def test_cells_past_2_62_are_told_apart_even_where_a_packed_key_would_wrap():
+    # dims (1, 2^24 + 1, 2^40): packed, (0, 0, 0) and (0, 2^24, 0) would both be 0 modulo 2^64
+    v = np.array([[0.0, 0.0, 0.0], [0.5, 2.0**24 + 0.5, 0.5], [0.5, 0.5, 2.0**40 - 0.5]])
+    labels, first = decimation._cells(v, np.zeros(3), 1.0)
+    assert len(set(labels.tolist())) == 3 and len(first) == 3
 
 
 def test_clusters_split_a_cell_by_the_side_its_normals_face():
