@@ -250,3 +250,12 @@ def test_the_extent_is_the_largest_side_of_the_box_not_the_coordinates_spread(of
     # a tetrahedron of side 5e-71 beside the origin: the coordinates spread over 1e-69, its box does not
     with pytest.raises(InvalidMeshError, match="too small"):
         cleaning.validate(TETRA * 5e-71 + offset, TETRA_FACES)
+
+
+def test_vertex_components_label_each_piece_and_a_vertex_in_no_face_alone():
+    v = np.vstack([TETRA, TETRA + [5.0, 0.0, 0.0], [[9.0, 9.0, 9.0]], TETRA[:3] + [0.0, 7.0, 0.0]])
+    f = np.vstack([TETRA_FACES, TETRA_FACES + 4, [[9, 10, 11]]])
+    labels = cleaning.vertex_components(Mesh(v, f))
+    assert labels.dtype == np.int64 and labels.shape == (12,)
+    groups = {frozenset(np.flatnonzero(labels == k).tolist()) for k in np.unique(labels)}
+    assert groups == {frozenset(range(4)), frozenset(range(4, 8)), frozenset([8]), frozenset([9, 10, 11])}

@@ -114,27 +114,42 @@ def test_cells_past_2_62_are_told_apart_even_where_a_packed_key_would_wrap():
 
 
 def test_clusters_split_a_cell_by_the_side_its_normals_face():
-    v = np.array([[0.1, 0.1, 0.1], [0.2, 0.2, 0.2], [0.3, 0.1, 0.2], [0.4, 0.4, 0.4], [1.5, 0.5, 0.5]])
-    normals = np.array([[0, 0, 1.0], [0, 0, -1.0], [0, 1.0, 0.1], [0.1, 0, -1.0], [0, 0, -1.0]])
+    v = np.array(
+        [
+            [0.1, 0.1, 0.1],
+            [0.2, 0.2, 0.2],
+            [0.3, 0.1, 0.2],
+            [0.4, 0.4, 0.4],
+            [1.5, 0.5, 0.5],
+            [0.5, 0.5, 0.5],
+            [0.6, 0.6, 0.6],
+        ]
+    )
+    normals = np.array(
+        [[0, 0, 1.0], [0, 0, -1.0], [0, 1.0, 0.1], [0.1, 0, -1.0], [0, 0, -1.0], [1.0, 0, 0], [0, 0, 0]]
+    )
     labels, count = decimation._clusters(v, v.min(axis=0), 1.0, normals)
-    # cell 0 holds vertices 0-3: 0 and 2 face the way vertex 0 does, 1 and 3 the other way
+    # cell 0 holds vertices 0-3 and 5-6: 0 and 2 face the way vertex 0 does, 1 and 3 the other way; 5
+    # (at right angles) and 6 (no normal) are not turned away, so they stay with 0
     assert count == 3
-    assert labels[0] == labels[2] != labels[1] == labels[3] != labels[4] != labels[0]
+    assert (
+        labels[0] == labels[2] == labels[5] == labels[6] != labels[1] == labels[3] != labels[4] != labels[0]
+    )
     assert labels.dtype == np.int64 and sorted(set(labels.tolist())) == [0, 1, 2]
     plain, n = decimation._clusters(v, v.min(axis=0), 1.0, None)
-    assert n == 2 and len(set(plain[:4].tolist())) == 1
+    assert n == 2 and len(set(plain[[0, 1, 2, 3, 5, 6]].tolist())) == 1
 
 
 def test_cluster_moves_each_vertex_to_its_cluster_mean_and_drops_collapsed_faces(monkeypatch):
     mesh = Mesh(
         np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [4, 0, 0], [5, 0, 0], [4, 1, 0]], np.float64),
-        np.array([[0, 1, 2], [0, 3, 4], [3, 4, 5], [1, 4, 5], [2, 5, 0]], np.int64),
+        np.array([[0, 1, 2], [0, 3, 4], [3, 4, 5], [1, 4, 5], [2, 5, 0], [1, 0, 2]], np.int64),
     )
     groups = np.array([0, 1, 1, 2, 2, 3])  # 1 = 2 and 3 = 4
     monkeypatch.setattr(decimation, "_clusters", lambda v, lo, h, normals: (groups, 4))
     out = decimation.cluster(mesh, 4)
     np.testing.assert_allclose(out.vertices, [[0, 0, 0], [0.5, 0.5, 0], [4.5, 0, 0], [4, 1, 0]])
-    # (0,1,1), (0,2,2) and (2,2,3) collapse: a face with a repeated cluster goes, whichever corners
+    # (0,1,1), (0,2,2), (2,2,3) and (1,0,1) collapse: a face with a repeated cluster goes, whichever corners
     np.testing.assert_array_equal(out.faces, [[1, 2, 3], [1, 3, 0]])
 
 
