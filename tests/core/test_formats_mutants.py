@@ -1,0 +1,82 @@
+"""The mesh readers' edges (issue 15 mutation pass): zip containers' limits and refusals in words."""
+
+from __future__ import annotations
+
+import io
+import zipfile
+from types import SimpleNamespace
+
+import pytest
+
+from app.core.formats import containers
+from app.core.meshdata import InvalidMeshError
+
+
+def _zip(members: dict[str, bytes], compression: int = zipfile.ZIP_STORED) -> bytes:
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression) as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    return buf.getvalue()
+
+
+def _with_flag(data: bytes, bit: int) -> bytes:
+    """The archive with a general-purpose flag bit set on its (one) central-directory entry."""
+    at = data.index(b"PK\x01\x02") + 8
+    raw = bytearray(data)
+    raw[at] |= bit
+    return bytes(raw)
+
+
+def _refusal(fn, *args) -> str:
+    with pytest.raises(InvalidMeshError) as info:
+        fn(*args)
+    return str(info.value)
+
+
+def test_not_a_zip_is_refused_in_words():
+    message = _refusal(
+        containers.open_zip, b"solid cube\n", SimpleNamespace(unpacked_bytes=lambda: 100), "3MF"
+    )
+    assert message == "could not read the file as 3MF: it is not a valid zip archive"
+
+
+def test_members_up_to_the_maximum_pass(monkeypatch):
+    monkeypatch.setattr(containers, "MAX_MEMBERS", 3)
+    budget = SimpleNamespace(unpacked_bytes=lambda: 1000)
+    assert len(containers.open_zip(_zip({f"{i}.obj": b"" for i in range(3)}), budget, "zip").infolist()) == 3
+    message = _refusal(containers.open_zip, _zip({f"{i}.obj": b"" for i in range(4)}), budget, "zip")
+    assert message == "the zip archive holds 4 files, more than 3"
+
+
+def test_an_archive_unpacking_to_exactly_the_budget_passes():
+    budget = SimpleNamespace(unpacked_bytes=lambda: 10)
+    containers.open_zip(_zip({"a.obj": b"x" * 10}), budget, "zip")
+    message = _refusal(containers.open_zip, _zip({"a.obj": b"x" * 11}), budget, "zip")
+    assert message == "the zip archive unpacks to 11 bytes, more than the 10 allowed"
+
+
+def test_only_the_encryption_flag_refuses_an_archive():
+    budget = SimpleNamespace(unpacked_bytes=lambda: 1000)
+    plain = _zip({"a.obj": b"v 0 0 0\n"})
+    containers.open_zip(_with_flag(plain, 0x2), budget, "zip")  # a compression option: fine
+    message = _refusal(containers.open_zip, _with_flag(plain, 0x1), budget, "zip")
+    assert message == "the zip archive is encrypted: upload it without a password"
+
+
+def _corrupt(name: str) -> zipfile.ZipFile:
+    data = bytearray(_zip({name: b"v 0 0 0\n" * 200}, zipfile.ZIP_DEFLATED))
+    start = data.index(b"PK\x03\x04") + 30 + len(name.encode())
+    data[start : start + 8] = b"\xff" * 8  # the deflate stream's first bytes
+    return zipfile.ZipFile(io.BytesIO(bytes(data)))
+
+
+def test_a_member_that_does_not_unpack_is_named_up_to_80_characters():
+    name = "m" * 90 + ".obj"
+    message = _refusal(containers.read_member, _corrupt(name), name, "zip")
+    assert message == f"could not unpack '{'m' * 80}' from the zip archive: it is corrupt"
+
+
+def test_a_damaged_archive_is_called_corrupt_in_words():
+    message = _refusal(containers.check_members, _corrupt("a.obj"), "3MF")
+    assert message == "the 3MF archive is corrupt: a file inside it does not unpack"
