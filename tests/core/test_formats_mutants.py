@@ -80,3 +80,53 @@ def test_a_member_that_does_not_unpack_is_named_up_to_80_characters():
 def test_a_damaged_archive_is_called_corrupt_in_words():
     message = _refusal(containers.check_members, _corrupt("a.obj"), "3MF")
     assert message == "the 3MF archive is corrupt: a file inside it does not unpack"
+
+
+def test_an_unknown_extension_is_named_up_to_20_characters_with_the_supported_ones():
+    from app.core.formats import detect_format
+
+    with pytest.raises(InvalidMeshError) as info:
+        detect_format("part.abcdefghijklmnopqrstuvwxyz")
+    assert str(info.value) == (
+        "unsupported mesh format 'abcdefghijklmnopqrst': use one of .obj, .off, .ply, .stl, .glb, .gltf,"
+        " .zip, .3mf, .dae, .drc (.zip: a glTF with its .bin)"
+    )
+
+
+def test_trimesh_files_are_read_as_they_are_without_welding():
+    from app.core.formats.scene import load_with_trimesh
+    from app.core.meshdata import Budget
+
+    data = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 0\nf 1 2 3\nf 4 3 2\n"  # vertex 4 repeats vertex 1
+    vertices, faces = load_with_trimesh(data, "obj", "OBJ", Budget())
+    assert vertices.shape == (4, 3) and faces.tolist() == [[0, 1, 2], [3, 2, 1]]
+
+
+def test_a_file_trimesh_cannot_read_is_refused_with_the_first_line_of_its_error(monkeypatch):
+    from app.core.formats import scene
+    from app.core.meshdata import Budget
+
+    def broken(*args, **kwargs):
+        raise ValueError("bad <COLLADA> root\nline 2 of the traceback")
+
+    monkeypatch.setattr(scene.trimesh, "load", broken)
+    message = _refusal(scene.load_with_trimesh, b"<xml/>", "dae", "COLLADA", Budget())
+    assert message == "could not read the file as COLLADA: bad <COLLADA> root"
+
+
+def test_placed_parts_are_counted_together_against_the_face_budget():
+    import trimesh
+
+    from app.core.formats.scene import scene_arrays
+    from app.core.meshdata import Budget
+
+    ball = trimesh.creation.icosphere(1)  # 42 vertices, 80 faces
+    box = trimesh.Scene()
+    box.add_geometry(ball, node_name="a")
+    box.add_geometry(ball.copy(), node_name="b")  # 84 vertices (under 6 x 15), 160 faces (over 8 x 15)
+    with pytest.raises(InvalidMeshError) as info:
+        scene_arrays(box, "3MF", Budget(15))
+    assert str(info.value) == (
+        "the 3MF scene (each part counted once per placement) declares 160 faces: far more than a mesh"
+        " within the limit of 15 vertices can have"
+    )
