@@ -205,3 +205,17 @@ def test_cluster_splits_sides_by_default_and_not_when_asked(monkeypatch):
     np.testing.assert_allclose(normals, decimation._vertex_normals(mesh, decimation.face_normals(mesh)))
     decimation.cluster(mesh, 100, split_sides=False)
     assert seen[-1][1] is None
+
+
+def test_cluster_to_one_vertex_starts_from_cells_of_the_whole_area(monkeypatch):
+    sizes: list[float] = []
+
+    def fake(v, lo, h, normals):
+        sizes.append(h)
+        return np.zeros(len(v), np.int64), 1
+
+    monkeypatch.setattr(decimation, "_clusters", fake)
+    mesh = _sphere(2)
+    out = decimation.cluster(mesh, 1)
+    assert sizes == [pytest.approx(np.sqrt(mesh.area()))]
+    np.testing.assert_allclose(out.vertices, [mesh.vertices.mean(axis=0)], atol=1e-15)
