@@ -130,3 +130,54 @@ def test_placed_parts_are_counted_together_against_the_face_budget():
         "the 3MF scene (each part counted once per placement) declares 160 faces: far more than a mesh"
         " within the limit of 15 vertices can have"
     )
+
+
+def _scene_of(*geometry):
+    import trimesh
+
+    scene = trimesh.Scene()
+    for g in geometry:
+        scene.add_geometry(g)
+    return scene
+
+
+@pytest.mark.parametrize("kind", ["empty mesh", "points"])
+def test_a_scene_without_a_face_holds_no_triangle_mesh(kind):
+    import numpy as np
+    import trimesh
+
+    from app.core.formats.scene import scene_arrays
+    from app.core.meshdata import Budget
+
+    points = np.random.default_rng(1).random((5, 3))
+    if kind == "points":
+        geometry = trimesh.PointCloud(points)
+    else:
+        geometry = trimesh.Trimesh(points, np.zeros((0, 3), int), process=False)
+    message = _refusal(scene_arrays, _scene_of(geometry), "COLLADA", Budget())
+    assert message == "the COLLADA file holds no triangle mesh (only points, lines or nothing)"
+
+
+def test_a_point_cloud_or_a_path_is_refused_in_words():
+    import numpy as np
+    import trimesh
+
+    from app.core.formats.scene import scene_arrays
+    from app.core.meshdata import Budget
+
+    cloud = trimesh.PointCloud(np.random.default_rng(2).random((5, 3)))
+    assert (
+        _refusal(scene_arrays, cloud, "PLY", Budget())
+        == "the mesh has no faces (a point cloud is not a surface)"
+    )
+    path = trimesh.load_path(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]))
+    assert _refusal(scene_arrays, path, "DXF", Budget()) == "the DXF file holds no triangle mesh"
+
+
+def test_short_is_the_first_line_of_an_error_at_most_200_characters_or_its_type():
+    from app.core.formats.scene import short
+
+    assert short(ValueError("  first line\nsecond")) == "first line"
+    assert short(ValueError("x" * 300)) == "x" * 200
+    assert short(KeyError()) == "KeyError"
+    assert short(ValueError("   ")) == "ValueError"
