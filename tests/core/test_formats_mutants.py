@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import sys
 import zipfile
 from types import SimpleNamespace
 
@@ -181,3 +182,78 @@ def test_short_is_the_first_line_of_an_error_at_most_200_characters_or_its_type(
     assert short(ValueError("x" * 300)) == "x" * 200
     assert short(KeyError()) == "KeyError"
     assert short(ValueError("   ")) == "ValueError"
+
+
+def test_3mf_refusals_name_3mf():
+    from app.core.formats.other import read_3mf
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_3mf, b"not a zip", Budget()) == (
+        "could not read the file as 3MF: it is not a valid zip archive"
+    )
+    data = bytearray(_zip({"3D/3dmodel.model": b"<model>" + b"x" * 400 + b"</model>"}, zipfile.ZIP_DEFLATED))
+    start = data.index(b"PK\x03\x04") + 30 + len(b"3D/3dmodel.model")
+    data[start : start + 8] = b"\xff" * 8
+    assert _refusal(read_3mf, bytes(data), Budget()) == (
+        "the 3MF archive is corrupt: a file inside it does not unpack"
+    )
+
+
+def test_a_collada_file_trimesh_cannot_read_names_collada():
+    from app.core.formats.other import read_dae
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_dae, b"\x00\x01 not xml", Budget()).startswith(
+        "could not read the file as COLLADA: "
+    )
+
+
+@pytest.fixture
+def fake_draco(monkeypatch):
+    import numpy as np
+
+    decoded = {"value": None}
+
+    def decode(data):
+        if isinstance(decoded["value"], Exception):
+            raise decoded["value"]
+        return decoded["value"]
+
+    monkeypatch.setitem(sys.modules, "DracoPy", SimpleNamespace(decode=decode))
+    decoded["value"] = SimpleNamespace(
+        points=np.arange(12, dtype=np.float32).reshape(4, 3),
+        faces=np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
+    )
+    return decoded
+
+
+def test_draco_points_and_faces_come_back_as_float64_and_int64(fake_draco):
+    import numpy as np
+
+    from app.core.formats.other import read_drc
+    from app.core.meshdata import Budget
+
+    vertices, faces = read_drc(b"DRACO....", Budget())
+    assert vertices.dtype == np.float64 and vertices.shape == (4, 3)
+    assert faces.dtype == np.int64 and faces.tolist() == [[0, 1, 2], [0, 2, 3]]
+
+
+def test_a_draco_point_cloud_has_no_faces(fake_draco):
+    import numpy as np
+
+    from app.core.formats.other import read_drc
+    from app.core.meshdata import Budget
+
+    fake_draco["value"] = SimpleNamespace(points=np.zeros(12, np.float32))  # flat, no faces attribute
+    vertices, faces = read_drc(b"DRACO....", Budget())
+    assert vertices.shape == (4, 3) and faces.shape == (0, 3) and faces.dtype == np.int64
+
+
+def test_a_draco_stream_the_decoder_refuses_is_named_with_its_error(fake_draco):
+    from app.core.formats.other import read_drc
+    from app.core.meshdata import Budget
+
+    fake_draco["value"] = RuntimeError("Failed to decode the geometry\ndetails")
+    assert _refusal(read_drc, b"DRACO....", Budget()) == (
+        "could not read the file as Draco: Failed to decode the geometry"
+    )
