@@ -28,7 +28,8 @@ def fake_simplifier(monkeypatch):
 
     def simplify(vertices, faces, target_count, agg):
         calls.append((vertices, faces, target_count, agg))
-        return vertices[:4] * 2.0, faces[:2].ravel()  # flat faces, as the library may return them
+        # float32 vertices and flat int32 faces: whatever the library gives, the Mesh is float64/int64
+        return (vertices[:4] * 2.0).astype(np.float32), faces[:2].ravel()
 
     monkeypatch.setitem(sys.modules, "fast_simplification", types.SimpleNamespace(simplify=simplify))
     return calls
