@@ -257,3 +257,21 @@ def test_a_draco_stream_the_decoder_refuses_is_named_with_its_error(fake_draco):
     assert _refusal(read_drc, b"DRACO....", Budget()) == (
         "could not read the file as Draco: Failed to decode the geometry"
     )
+
+
+def test_obj_without_vertex_lines_is_refused_in_words():
+    from app.core.formats.obj import read_obj
+    from app.core.meshdata import Budget
+
+    message = _refusal(read_obj, b"f 1 2 3\n", Budget())
+    assert message == "the mesh has no vertices (the file has no OBJ 'v' lines)"
+
+
+def test_obj_relative_indices_count_back_from_the_vertices_defined_so_far():
+    from app.core.formats.obj import read_obj
+    from app.core.meshdata import Budget
+
+    data = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nv 0 0 1\nf -4 -1 -2\nf 1 2 4\n"
+    vertices, faces = read_obj(data, Budget())
+    assert vertices.shape == (4, 3)
+    assert faces.tolist() == [[0, 1, 2], [0, 3, 2], [0, 1, 3]]
