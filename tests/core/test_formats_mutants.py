@@ -275,3 +275,18 @@ def test_obj_relative_indices_count_back_from_the_vertices_defined_so_far():
     vertices, faces = read_obj(data, Budget())
     assert vertices.shape == (4, 3)
     assert faces.tolist() == [[0, 1, 2], [0, 3, 2], [0, 1, 3]]
+
+
+def test_obj_counts_are_checked_against_the_budget_in_words():
+    from app.core.formats.obj import read_obj
+    from app.core.meshdata import Budget
+
+    seven = b"v 0 0 0\n" * 7 + b"f 1 2 3\n"
+    assert _refusal(read_obj, seven, Budget(1)) == (
+        "the OBJ file declares 7 vertices: far more than the limit of 1 vertices could hold even after"
+        " welding duplicates"
+    )
+    fan = b"v 0 0 0\n" * 6 + b"f 1 2 3 4 5 6\n" * 3  # 3 hexagons: 12 triangles
+    assert _refusal(read_obj, fan, Budget(1)) == (
+        "the OBJ file declares 12 faces: far more than a mesh within the limit of 1 vertices can have"
+    )
