@@ -290,3 +290,23 @@ def test_obj_counts_are_checked_against_the_budget_in_words():
     assert _refusal(read_obj, fan, Budget(1)) == (
         "the OBJ file declares 12 faces: far more than a mesh within the limit of 1 vertices can have"
     )
+
+
+def test_draco_refusals_in_words(fake_draco):
+    import numpy as np
+
+    from app.core.formats.other import read_drc
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_drc, b"PLY....", Budget()) == (
+        "could not read the file as Draco: it does not start with 'DRACO'"
+    )
+    fake_draco["value"] = SimpleNamespace(points=np.zeros((7, 3)), faces=np.zeros((3, 3)))
+    assert _refusal(read_drc, b"DRACO....", Budget(1)) == (
+        "the Draco file declares 7 vertices: far more than the limit of 1 vertices could hold even after"
+        " welding duplicates"
+    )
+    fake_draco["value"] = SimpleNamespace(points=np.zeros((6, 3)), faces=np.zeros((9, 3)))
+    assert _refusal(read_drc, b"DRACO....", Budget(1)) == (
+        "the Draco file declares 9 faces: far more than a mesh within the limit of 1 vertices can have"
+    )

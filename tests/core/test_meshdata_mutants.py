@@ -25,3 +25,9 @@ def test_containers_may_unpack_at_least_64_mib_and_256_bytes_per_vertex():
     assert Budget(1000).unpacked_bytes() == 64 << 20
     assert Budget(1_000_000).unpacked_bytes() == 256_000_000
     assert Budget().unpacked_bytes() == 1 << 40
+
+
+def test_zero_vertices_declared_pass_the_budget():
+    Budget(10).vertices(0, "the header")
+    with pytest.raises(InvalidMeshError, match="^the file is corrupt: the header declares a negative count$"):
+        Budget(10).vertices(-1, "the header")
