@@ -310,3 +310,21 @@ def test_draco_refusals_in_words(fake_draco):
     assert _refusal(read_drc, b"DRACO....", Budget(1)) == (
         "the Draco file declares 9 faces: far more than a mesh within the limit of 1 vertices can have"
     )
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (b"v 0 0\nv 1 1 1\nv 2 2 2\nf 1 2 3\n", "an OBJ vertex line has fewer than 3 numbers"),
+        (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 x 3\n", "an OBJ face line holds something that is not a number"),
+        (
+            b"v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2\n",
+            "the mesh has no faces (the OBJ file has no 'f' lines; a point cloud or lines are not a surface)",
+        ),
+    ],
+)
+def test_obj_refusals_name_the_obj_line(data, message):
+    from app.core.formats.obj import read_obj
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_obj, data, Budget()) == message
