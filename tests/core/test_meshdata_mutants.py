@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from app.core.meshdata import FACE_FACTOR, Budget, InvalidMeshError
+from app.core.meshdata import FACE_FACTOR, RAW_VERTEX_FACTOR, Budget, InvalidMeshError
 
 
 def test_zero_faces_declared_pass_the_budget_and_a_negative_count_is_corrupt():
@@ -31,3 +31,13 @@ def test_zero_vertices_declared_pass_the_budget():
     Budget(10).vertices(0, "the header")
     with pytest.raises(InvalidMeshError, match="^the file is corrupt: the header declares a negative count$"):
         Budget(10).vertices(-1, "the header")
+
+
+def test_vertices_up_to_exactly_the_raw_factor_times_the_limit_pass():
+    Budget(10).vertices(RAW_VERTEX_FACTOR * 10, "the header")
+    with pytest.raises(InvalidMeshError) as info:
+        Budget(10).vertices(RAW_VERTEX_FACTOR * 10 + 1, "the header")
+    assert str(info.value) == (
+        "the header declares 61 vertices: far more than the limit of 10 vertices could hold even after"
+        " welding duplicates"
+    )
