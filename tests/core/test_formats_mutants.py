@@ -328,3 +328,28 @@ def test_obj_refusals_name_the_obj_line(data, message):
     from app.core.meshdata import Budget
 
     assert _refusal(read_obj, data, Budget()) == message
+
+
+def test_obj_face_counts_against_the_budget_one_per_triangle_and_a_short_line_counts_one():
+    from app.core.formats.obj import read_obj
+    from app.core.meshdata import Budget
+
+    head = b"v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    assert read_obj(head + b"f 1 2 3\n" * 8, Budget(1))[1].shape == (8, 3)  # exactly 8 x the limit
+    assert _refusal(read_obj, head + b"f 1 2 3\n" * 8 + b"f 1 2\n", Budget(1)) == (
+        "the OBJ file declares 9 faces: far more than a mesh within the limit of 1 vertices can have"
+    )
+
+
+@pytest.mark.parametrize(
+    ("faces", "message"),
+    [
+        (b"f 0 1 2\n", "an OBJ face refers to vertex 0, but OBJ counts vertices from 1"),
+        (b"f  \n", "a face has fewer than 3 corners"),
+    ],
+)
+def test_obj_faces_without_usable_indices_are_refused_in_words(faces, message):
+    from app.core.formats.obj import read_obj
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_obj, b"v 0 0 0\nv 1 0 0\nv 0 1 0\n" + faces, Budget()) == message
