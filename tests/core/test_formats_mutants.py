@@ -353,3 +353,54 @@ def test_obj_faces_without_usable_indices_are_refused_in_words(faces, message):
     from app.core.meshdata import Budget
 
     assert _refusal(read_obj, b"v 0 0 0\nv 1 0 0\nv 0 1 0\n" + faces, Budget()) == message
+
+
+_TETRA_OFF_VERTICES = b"0 0 0\n1 0 0\n0 1 0\n0 0 1\n"
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (b"# nothing\n", "the mesh has no vertices (the OFF file is empty)"),
+        (b"PLY\n", "could not read the file as OFF: it does not start with 'OFF'"),
+        *[
+            (
+                keyword + b"\n4 1 0\n" + _TETRA_OFF_VERTICES + b"3 0 1 2\n",
+                "this OFF variant (4D, n-dimensional or binary) is not supported: export plain OFF",
+            )
+            for keyword in (b"4OFF", b"nOFF", b"OFFBINARY")
+        ],
+        (
+            b"OFF\n4 1 0\n" + _TETRA_OFF_VERTICES + b"3\n",
+            "an OFF face line lists fewer corners than its count says",
+        ),
+        (
+            b"OFF\n4 1 0\n" + _TETRA_OFF_VERTICES + b"2 0 1\n",
+            "an OFF face line must start with its number of corners (3 or more)",
+        ),
+        (
+            b"OFF\n4 1 0\n" + _TETRA_OFF_VERTICES + b"3.5 0 1 2\n",
+            "an OFF face line must start with its number of corners (3 or more)",
+        ),
+        (b"OFF\n4 1 0\n" + _TETRA_OFF_VERTICES + b"3 0 1 2.5\n", "an OFF face index is not a whole number"),
+        (b"OFF\n4 1 0\n0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n", "an OFF vertex line has fewer than 3 numbers"),
+        (
+            b"OFF\n4 1 0\n" + _TETRA_OFF_VERTICES + b"3 0 x 2\n",
+            "an OFF face line holds something that is not a number",
+        ),
+    ],
+)
+def test_off_refusals_in_words(data, message):
+    from app.core.formats.off import read_off
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_off, data, Budget()) == message
+
+
+def test_off_comments_are_ignored_wherever_they_are():
+    from app.core.formats.off import read_off
+    from app.core.meshdata import Budget
+
+    data = b"OFF # a tetrahedron\n# the counts\n4 1 0\n" + _TETRA_OFF_VERTICES + b"3 0 1 2 # one face\n"
+    vertices, faces = read_off(data, Budget())
+    assert vertices.shape == (4, 3) and faces.tolist() == [[0, 1, 2]]
