@@ -404,3 +404,44 @@ def test_off_comments_are_ignored_wherever_they_are():
     data = b"OFF # a tetrahedron\n# the counts\n4 1 0\n" + _TETRA_OFF_VERTICES + b"3 0 1 2 # one face\n"
     vertices, faces = read_off(data, Budget())
     assert vertices.shape == (4, 3) and faces.tolist() == [[0, 1, 2]]
+
+
+@pytest.mark.parametrize(
+    ("data", "limit", "message"),
+    [
+        (b"OFF\n", None, "could not read the file as OFF: the counts line is missing or not numbers"),
+        (
+            b"OFF\n4 1 0\n",
+            None,
+            "the OFF header declares 4 vertices and 1 faces, but the file holds only 0 data lines:"
+            " it is truncated",
+        ),
+        (
+            b"OFF\n7 1 0\n" + _TETRA_OFF_VERTICES,
+            1,
+            "the OFF header declares 7 vertices: far more than the limit of 1 vertices could hold even after"
+            " welding duplicates",
+        ),
+        (
+            b"OFF\n4 9 0\n" + _TETRA_OFF_VERTICES,
+            1,
+            "the OFF header declares 9 faces: far more than a mesh within the limit of 1 vertices can have",
+        ),
+        (
+            b"OFF\n4 1 0\n" + _TETRA_OFF_VERTICES + b"3 0 1 2\n3 0 1 3\n",
+            None,
+            "the OFF header declares 4 vertices and 1 faces, but the file holds 6 data lines: the counts are"
+            " wrong or the file is corrupt",
+        ),
+        (
+            b"OFF\n4 1 0\n0 y 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n",
+            None,
+            "an OFF vertex line holds something that is not a number",
+        ),
+    ],
+)
+def test_off_header_and_counts_refusals_in_words(data, limit, message):
+    from app.core.formats.off import read_off
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_off, data, Budget(limit)) == message
