@@ -445,3 +445,106 @@ def test_off_header_and_counts_refusals_in_words(data, limit, message):
     from app.core.meshdata import Budget
 
     assert _refusal(read_off, data, Budget(limit)) == message
+
+
+def _binary_stl(count: int, declared: int | None = None, header: bytes = b"\x00" * 80) -> bytes:
+    import struct
+
+    import numpy as np
+
+    records = np.zeros(count, dtype=[("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
+    records["corners"] = np.arange(count * 9, dtype=np.float32).reshape(count, 3, 3)
+    return header + struct.pack("<I", count if declared is None else declared) + records.tobytes()
+
+
+_FACET = b"facet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\n"
+
+
+def _ascii_stl(body: bytes, end: bytes = b"endsolid t\n") -> bytes:
+    return b"solid t\n" + body + end
+
+
+@pytest.mark.parametrize("lead", [b"", b"\n  "])
+def test_a_short_ascii_stl_is_read_even_after_leading_blanks(lead):
+    import numpy as np
+
+    from app.core.formats.stl import read_stl
+    from app.core.meshdata import Budget
+
+    vertices, faces = read_stl(lead + _ascii_stl(_FACET), Budget())
+    assert vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0]] and vertices.dtype == np.float64
+    assert faces.tolist() == [[0, 1, 2]] and faces.dtype == np.int64
+
+
+@pytest.mark.parametrize("count", [0, 2])
+def test_a_binary_stl_of_exactly_its_declared_size_is_read(count):
+    import numpy as np
+
+    from app.core.formats.stl import read_stl
+    from app.core.meshdata import Budget
+
+    vertices, faces = read_stl(_binary_stl(count), Budget())  # count 0: exactly 84 bytes
+    assert vertices.dtype == np.float64 and faces.dtype == np.int64
+    np.testing.assert_array_equal(vertices, np.arange(count * 9, dtype=np.float64).reshape(-1, 3))
+    assert faces.tolist() == np.arange(3 * count).reshape(-1, 3).tolist()
+
+
+_NO_VERTEX_84 = b"solid t\n" + b" " * (84 - len(b"solid t\nendsolid t\n")) + b"endsolid t\n"
+
+
+@pytest.mark.parametrize(
+    ("data", "limit", "message"),
+    [
+        (_ascii_stl(_FACET, b""), None, "the ASCII STL does not end with 'endsolid': it is truncated"),
+        (
+            _ascii_stl(_FACET * 9),
+            1,
+            "the STL file declares 9 faces: far more than a mesh within the limit of 1 vertices can have",
+        ),
+        (_ascii_stl(b""), None, "the mesh has no vertices (the ASCII STL has no 'vertex' lines)"),
+        (
+            _NO_VERTEX_84,
+            None,
+            "the file is neither an ASCII STL (no 'vertex' lines) nor a binary STL (its header declares"
+            " 175382628 triangles, 8769131484 bytes, but the file holds 84 bytes)",
+        ),
+        (
+            _ascii_stl(b"vertex 0 0\nvertex 1 0 0\nvertex 0 1 0\n"),
+            None,
+            "an STL vertex line does not hold exactly 3 numbers",
+        ),
+        (
+            _ascii_stl(b"vertex 0 x 0\nvertex 1 0 0\nvertex 0 1 0\n"),
+            None,
+            "an STL vertex line holds something that is not a number",
+        ),
+        (
+            _ascii_stl(b"vertex 0 0 0\n" * 4),
+            None,
+            "the ASCII STL holds 4 vertex lines, not 3 per facet: it is truncated",
+        ),
+        (
+            _binary_stl(9),
+            1,
+            "the STL header declares 9 faces: far more than a mesh within the limit of 1 vertices can have",
+        ),
+        (b"\x00\x01\x02", None, "could not read the file as STL: it is too short for a binary STL"),
+        (
+            b"A" * 100,
+            None,
+            "the STL header declares 1094795585 triangles (54739779334 bytes), but the file holds 100 bytes:"
+            " it is truncated or corrupt",
+        ),
+        (
+            _binary_stl(2, declared=3, header=b"solid" + b"\x00" * 75),  # 'solid' then NULs: binary
+            None,
+            "the STL header declares 3 triangles (234 bytes), but the file holds 184 bytes: it is truncated"
+            " or corrupt",
+        ),
+    ],
+)
+def test_stl_refusals_in_words(data, limit, message):
+    from app.core.formats.stl import read_stl
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_stl, data, Budget(limit)) == message
