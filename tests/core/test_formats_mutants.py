@@ -548,3 +548,111 @@ def test_stl_refusals_in_words(data, limit, message):
     from app.core.meshdata import Budget
 
     assert _refusal(read_stl, data, Budget(limit)) == message
+
+
+# --- the readers' shared helpers (formats/common.py) ---------------------------------------------
+
+
+def test_text_lines_drops_a_leading_bom_and_unifies_line_ends():
+    from app.core.formats.common import BOM, text_lines
+
+    assert text_lines(BOM + b"a\r\nb\rc\n") == b"a\nb\nc\n"
+    assert text_lines(b"a" + BOM) == b"a" + BOM  # only a leading mark is dropped
+    assert text_lines(b"plain\n") == b"plain\n"
+
+
+@pytest.mark.parametrize(
+    "lines",
+    [
+        [b"1 2 3", b"4.5 6", b"7 8 9 10"],
+        [b"1 nan 3", b"4 5", b"inf 6 7"],  # a line that holds 'nan' itself: counted by splitting
+        [b"1 2 3"],
+    ],
+)
+def test_numbers_give_each_line_its_width(lines):
+    import numpy as np
+
+    from app.core.formats.common import numbers
+
+    values, widths = numbers(lines, "a line")
+    expected = [float(t) for line in lines for t in line.split()]
+    np.testing.assert_array_equal(values, expected)
+    assert values.dtype == np.float64 and widths.dtype == np.int64
+    assert widths.tolist() == [len(line.split()) for line in lines]
+
+
+def test_numbers_and_indices_of_no_lines_are_empty():
+    import numpy as np
+
+    from app.core.formats.common import indices, numbers
+
+    values, widths = numbers([], "a line")
+    assert (
+        values.shape == (0,)
+        and values.dtype == np.float64
+        and widths.shape == (0,)
+        and widths.dtype == np.int64
+    )
+    index, corners = indices([], "a face line")
+    assert index.dtype == np.int64 and corners.dtype == np.int64 and index.size == corners.size == 0
+
+
+def test_indices_are_int64_and_a_zero_index_is_counted_by_splitting():
+    from app.core.formats.common import indices
+
+    index, corners = indices([b"1 2 3", b"4 5 6 7"], "a face line")
+    assert (
+        index.tolist() == [1, 2, 3, 4, 5, 6, 7] and corners.tolist() == [3, 4] and str(index.dtype) == "int64"
+    )
+    index, corners = indices([b"1 0 3", b"4 5 6 7"], "a face line")
+    assert index.tolist() == [1, 0, 3, 4, 5, 6, 7] and corners.tolist() == [3, 4]
+
+
+@pytest.mark.parametrize("lines", [[b"1 2 x"], [b"1 2 3", b"4 y"], [b"1 nan", b"2 3x"]])
+def test_a_token_that_is_not_a_number_is_refused_naming_the_line_kind(lines):
+    from app.core.formats.common import numbers
+
+    assert (
+        _refusal(numbers, lines, "a PLY vertex line")
+        == "a PLY vertex line holds something that is not a number"
+    )
+
+
+def test_first_columns_takes_the_first_k_of_each_row():
+    import numpy as np
+
+    from app.core.formats.common import first_columns
+
+    values = np.arange(10.0)
+    np.testing.assert_array_equal(
+        first_columns(values, np.array([3, 4, 3]), 3, "x"), [[0, 1, 2], [3, 4, 5], [7, 8, 9]]
+    )
+    np.testing.assert_array_equal(first_columns(values[:6], np.array([3, 3]), 3, "x"), [[0, 1, 2], [3, 4, 5]])
+    assert _refusal(first_columns, values[:5], np.array([3, 2]), 3, "a vertex line") == (
+        "a vertex line has fewer than 3 numbers"
+    )
+
+
+def test_fan_triangulate_fans_each_polygon_from_its_first_corner():
+    import numpy as np
+
+    from app.core.formats.common import fan_triangulate
+
+    faces = fan_triangulate(np.array([0, 1, 2, 3, 4, 10, 11, 12, 5, 6, 7, 8]), np.array([5, 3, 4]))
+    assert faces.tolist() == [[0, 1, 2], [0, 2, 3], [0, 3, 4], [10, 11, 12], [5, 6, 7], [5, 7, 8]]
+    assert fan_triangulate(np.arange(6), np.array([3, 3])).tolist() == [[0, 1, 2], [3, 4, 5]]
+    assert _refusal(fan_triangulate, np.arange(5), np.array([3, 2])) == "a face has fewer than 3 corners"
+
+
+def test_whole_numbers_up_to_2_53_and_nothing_else():
+    import numpy as np
+
+    from app.core.formats.common import whole_numbers
+
+    out = whole_numbers(np.array([0.0, 3.0, -2.0, 2.0**53]), "an index")
+    assert out.dtype == np.int64 and out.tolist() == [0, 3, -2, 2**53]
+    assert whole_numbers(np.zeros(0), "an index").dtype == np.int64
+    for bad in (2.5, np.nan, np.inf):
+        assert _refusal(whole_numbers, np.array([1.0, bad]), "an index") == "an index is not a whole number"
+    assert _refusal(whole_numbers, np.array([2.0**53 + 2]), "an index") == "an index is far out of range"
+    assert _refusal(whole_numbers, np.array([-(2.0**53) - 2]), "an index") == "an index is far out of range"
