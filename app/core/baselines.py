@@ -63,7 +63,10 @@ def sample_surface(mesh: Mesh, count: int, rng: np.random.Generator) -> np.ndarr
     """(count, 3) points uniform over the surface: a face with probability ∝ area, then a uniform
     point of that triangle (the square-root barycentric rule of Osada et al. §4.2)."""
     areas = mesh.face_areas()
-    faces = rng.choice(mesh.n_faces, size=count, p=areas / areas.sum())
+    total = areas.sum()
+    if not (np.isfinite(total) and total > 0):  # else NumPy's "probabilities contain NaN"
+        raise ValueError("cannot sample a surface of zero area")
+    faces = rng.choice(mesh.n_faces, size=count, p=areas / total)
     r1 = np.sqrt(rng.random(count))[:, None]
     r2 = rng.random(count)[:, None]
     a, b, c = (mesh.vertices[mesh.faces[faces, i]] for i in range(3))

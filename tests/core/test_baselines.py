@@ -92,3 +92,10 @@ def test_d2_invariant_to_rigid_motion_and_scale(cube: Mesh) -> None:
     moved = Mesh(0.01 * cube.vertices @ _rotation(2).T + [1.0, 2.0, 3.0], cube.faces)
     # the same seed samples the same faces and barycentrics: ratios agree to round-off
     assert l1_distance(h[None], d2_histogram(moved, seed=5)[None])[0, 0] < 1e-3
+
+
+def test_d2_of_a_surface_without_area_says_so() -> None:
+    # collinear corners: an extent but no area (before, NumPy's "probabilities contain NaN")
+    flat = Mesh(np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]]), np.array([[0, 1, 2], [1, 2, 3]]))
+    with pytest.raises(ValueError, match="zero area"):
+        d2_histogram(flat)
