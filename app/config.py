@@ -50,7 +50,7 @@ class EncodeSettings(BaseModel):
     mode: str = "hard"
     sigma_scale: float = 1.0
     keypoints_only: bool = False
-    area_weighted: bool = False
+    area_weighted: bool = EncodeParams.area_weighted
     fusion: bool = True  # append the scaled Shape-DNA when the vocabulary has fusion scales (app.core.fusion)
 
     def params(self) -> EncodeParams:

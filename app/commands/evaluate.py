@@ -36,8 +36,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     scope = p.add_mutually_exclusive_group()
     scope.add_argument("--keypoints-only", action="store_true", help="BoF over the keypoints only")
     scope.add_argument("--all-vertices", action="store_true", help="BoF over every vertex (default)")
-    p.add_argument("--area-weighted", action="store_true",
-                   help="each vertex counts by its area in the BoF (an integral over the surface)")
+    p.add_argument("--area-weighted", action=argparse.BooleanOptionalAction,
+                   default=EvaluationOptions.area_weighted,
+                   help="each vertex counts by its area in the BoF (eq. 7, an integral over the surface); "
+                   "--no-area-weighted: each vertex by 1 (eq. 8)")
     flt = p.add_mutually_exclusive_group()
     flt.add_argument("--filter", dest="keypoint_filter", action="store_true", default=None,
                      help="filter the keypoints by persistence and contrast"

@@ -33,7 +33,9 @@ class EncodeParams:
     mode           : "hard" (eq. 6, default) or "soft" (eq. 5)
     sigma_scale    : soft VQ width, as a multiple of the vocabulary's typical quantisation distance
     keypoints_only : integrate over the filtered keypoints instead of all vertices (eq. 8)
-    area_weighted  : weight each vertex by its area (eq. 7 as an integral) instead of 1 (eq. 8)
+    area_weighted  : weight each vertex by its lumped area: eq. 7, F = ∫ θ dμ, the default (the same
+                     surface gives the same F however its vertices are spread); False: each vertex
+                     by 1 (eq. 8)
     normalize      : divide F by the total weight, so F does not depend on the vertex count
     fusion         : append the scaled Shape-DNA (app.core.fusion) when the vocabulary has fusion
                      scales; a vocabulary without them (older ones) always gives the pure BoF
@@ -42,7 +44,7 @@ class EncodeParams:
     mode: str = "hard"
     sigma_scale: float = 1.0
     keypoints_only: bool = False
-    area_weighted: bool = False
+    area_weighted: bool = True
     normalize: bool = True
     fusion: bool = True
 
@@ -92,7 +94,10 @@ class Vocabulary:
         bofs = np.stack([self.bof(d, params) for d in descriptions])  # (N, v)
         dnas = np.stack([dna_vector(d, count) for d in descriptions])  # (N, c)
         scales = fit_scales(bofs, dnas, weight)
-        return replace(self, metadata=dict(self.metadata, fusion=scales.to_dict()))
+        # the BoF scale holds for BoFs encoded this way only (area-weighted ones have another median)
+        p = params or EncodeParams()
+        encoded = {"mode": p.mode, "keypoints_only": p.keypoints_only, "area_weighted": p.area_weighted}
+        return replace(self, metadata=dict(self.metadata, fusion=scales.to_dict(), encode=encoded))
 
     @classmethod
     def fit(

@@ -46,7 +46,7 @@ class EvaluationOptions:
     vocabulary_size: int = 64
     mode: str = "hard"  # hard | soft
     keypoints_only: bool = False  # BoF over the keypoints instead of every vertex
-    area_weighted: bool = False  # BoF as an integral over the surface (each vertex by its area)
+    area_weighted: bool = EncodeParams.area_weighted  # BoF as an integral over the surface (eq. 7)
     keypoint_filter: bool = KeypointFilter.enabled
     target_vertices: int = DescribeParams.target_vertices
     k: int = DescribeParams.k  # eigenpairs
@@ -76,6 +76,7 @@ class Row:
     describe: DescribeParams
     run: str = "run5"
     fusion: float | None = None  # Shape-DNA weight of a fused BoF row
+    area_weighted: bool | None = None  # the BoF's integral; None: the options'
 
 
 @dataclass
@@ -112,7 +113,7 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
         elif name == "paper":
             paper = replace(base, target_vertices=0, smoothing=0, time_range="spectrum",
                             laplacian="cotangent", remesh=False)
-            bof = [Row(name, "bof", paper, "run5")]
+            bof = [Row(name, "bof", paper, "run5", area_weighted=False)]  # eq. 8, a sum over vertices
         else:
             rows.append(Row(name, name, base))
             continue
@@ -225,8 +226,9 @@ def _bof_lines(
 
     k-means seeds alone move mAP by ~0.3 points on SHREC'11, so comparisons finer than that need seeds > 1.
     """
+    area_weighted = options.area_weighted if row.area_weighted is None else row.area_weighted
     params = EncodeParams(mode=options.mode, keypoints_only=options.keypoints_only,
-                          area_weighted=options.area_weighted, fusion=row.fusion is not None)
+                          area_weighted=area_weighted, fusion=row.fusion is not None)
     fitted = {} if fitted is None else fitted
     per_seed = [_bof_lines_one_seed(row, db, queries, labels, options, params, options.seed + i, other,
                                     fitted) for i in range(options.seeds)]

@@ -35,9 +35,11 @@ WORDS = np.array([[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0]], np.float32)
 def test_hard_vq_assigns_the_nearest_word_and_counts():
     vocab = Vocabulary(WORDS, run="run5", sigma=0.5)
     p = np.array([[0.1, 0, 0, 0], [0.9, 0.2, 0, 0], [0.2, 0.7, 0, 0], [0.8, 0, 0, 0]])
-    bof = vocab.encode(make_description(h_with_run5(p)), EncodeParams(normalize=False))
+    per_vertex = EncodeParams(normalize=False, area_weighted=False)
+    bof = vocab.encode(make_description(h_with_run5(p)), per_vertex)
     assert bof.tolist() == [1.0, 2.0, 1.0]  # eq. 8: Σ θ(x)
-    assert np.allclose(vocab.encode(make_description(h_with_run5(p))), [0.25, 0.5, 0.25])
+    assert np.allclose(vocab.encode(make_description(h_with_run5(p)), EncodeParams(area_weighted=False)),
+                       [0.25, 0.5, 0.25])
 
 
 def test_soft_vq_rows_sum_to_one_and_tend_to_hard_as_sigma_shrinks():
@@ -58,8 +60,13 @@ def test_keypoints_only_and_area_weighting():
     p = np.array([[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0]], float)
     d = make_description(h_with_run5(p), keypoints=np.array([True, True, False]),
                          weights=np.array([0.5, 0.25, 0.25]))
-    assert np.allclose(vocab.encode(d, EncodeParams(keypoints_only=True)), [0.5, 0.5, 0.0])
+    by_count = EncodeParams(keypoints_only=True, area_weighted=False)
+    assert np.allclose(vocab.encode(d, by_count), [0.5, 0.5, 0.0])
+    assert np.allclose(vocab.encode(d, EncodeParams(keypoints_only=True)), [2 / 3, 1 / 3, 0.0])
     assert np.allclose(vocab.encode(d, EncodeParams(area_weighted=True)), [0.5, 0.25, 0.25])
+    # the default is eq. 7, the integral over the surface: each vertex by its lumped area
+    assert np.allclose(vocab.encode(d), [0.5, 0.25, 0.25])
+    assert np.allclose(vocab.encode(d, EncodeParams(area_weighted=False)), [1 / 3, 1 / 3, 1 / 3])
 
 
 def test_l1_distance_by_hand():

@@ -215,7 +215,7 @@ def test_params_dict_is_every_encode_setting():
         "mode": "soft",
         "sigma_scale": 2.0,
         "keypoints_only": False,
-        "area_weighted": False,
+        "area_weighted": True,
         "normalize": True,
         "fusion": True,
     }

@@ -326,6 +326,11 @@ def test_command_passes_the_new_flags(folder: Path, tmp_path: Path, monkeypatch:
     with pytest.raises(CommandError):
         plain.func(plain)
     assert seen[1].keypoint_filter == KeypointFilter().enabled is False
+    assert seen[1].area_weighted is True  # eq. 7 by default
+    per_vertex = parser.parse_args(["evaluate", str(folder), "--no-area-weighted"])
+    with pytest.raises(CommandError):
+        per_vertex.func(per_vertex)
+    assert seen[2].area_weighted is False
     bad = parser.parse_args(["evaluate", str(folder), "--fusion", "heavy"])
     with pytest.raises(CommandError, match="--fusion"):
         bad.func(bad)
@@ -339,3 +344,5 @@ def test_paper_preset_is_the_papers_method(folder: Path, tmp_path: Path) -> None
               "time_range=spectrum")
     for part in wanted:
         assert part in describe.split(";"), (part, describe)
+    # and eq. 8, the sum over vertices, though the default BoF is eq. 7's integral
+    assert result.rows[0].details["encode"]["area_weighted"] is False
