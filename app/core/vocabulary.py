@@ -48,6 +48,10 @@ class EncodeParams:
     normalize: bool = True
     fusion: bool = True
 
+    def encoding(self) -> dict:
+        """The settings that change a BoF's distances (recorded with a vocabulary's fusion scale)."""
+        return {"mode": self.mode, "keypoints_only": self.keypoints_only, "area_weighted": self.area_weighted}
+
 
 @dataclass(frozen=True)
 class Vocabulary:
@@ -95,8 +99,7 @@ class Vocabulary:
         dnas = np.stack([dna_vector(d, count) for d in descriptions])  # (N, c)
         scales = fit_scales(bofs, dnas, weight)
         # the BoF scale holds for BoFs encoded this way only (area-weighted ones have another median)
-        p = params or EncodeParams()
-        encoded = {"mode": p.mode, "keypoints_only": p.keypoints_only, "area_weighted": p.area_weighted}
+        encoded = (params or EncodeParams()).encoding()
         return replace(self, metadata=dict(self.metadata, fusion=scales.to_dict(), encode=encoded))
 
     @classmethod

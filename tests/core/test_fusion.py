@@ -102,6 +102,13 @@ def test_vocabulary_with_fusion_encodes_the_fused_vector_and_keeps_its_scales(tm
     assert np.array_equal(vocab.encode(d, off), plain.encode(d))
     again = Vocabulary.load(vocab.save(tmp_path / "v"))
     assert again.fusion == scales and np.array_equal(again.encode(d), fused)
+    # the scale is the median of BoFs encoded one way; the vocabulary says which
+    assert again.metadata["encode"] == {"mode": "hard", "keypoints_only": False, "area_weighted": True}
+    by_count = EncodeParams(area_weighted=False)
+    counted = plain.with_fusion(descs, by_count, weight=0.5)
+    assert counted.metadata["encode"]["area_weighted"] is False
+    assert counted.fusion.bof == pytest.approx(np.median(pairwise_l1(np.stack([plain.encode(x, by_count)
+                                                                            for x in descs]))))
 
 
 def test_fusion_uses_only_the_eigenvalues_every_training_shape_has():
