@@ -567,6 +567,7 @@ def test_text_lines_drops_a_leading_bom_and_unifies_line_ends():
         [b"1 2 3", b"4.5 6", b"7 8 9 10"],
         [b"1 nan 3", b"4 5", b"inf 6 7"],  # a line that holds 'nan' itself: counted by splitting
         [b"1 2 3"],
+        [b"1 nan nan", b"2"],  # as many NaN in the data as there are lines
     ],
 )
 def test_numbers_give_each_line_its_width(lines):
@@ -605,7 +606,11 @@ def test_indices_are_int64_and_a_zero_index_is_counted_by_splitting():
         index.tolist() == [1, 2, 3, 4, 5, 6, 7] and corners.tolist() == [3, 4] and str(index.dtype) == "int64"
     )
     index, corners = indices([b"1 0 3", b"4 5 6 7"], "a face line")
-    assert index.tolist() == [1, 0, 3, 4, 5, 6, 7] and corners.tolist() == [3, 4]
+    assert (
+        index.tolist() == [1, 0, 3, 4, 5, 6, 7] and corners.tolist() == [3, 4] and str(index.dtype) == "int64"
+    )
+    index, corners = indices([b"1", b"0 0"], "a face line")  # as many non-zero values as separators
+    assert index.tolist() == [1, 0, 0] and corners.tolist() == [1, 2]
 
 
 @pytest.mark.parametrize("lines", [[b"1 2 x"], [b"1 2 3", b"4 y"], [b"1 nan", b"2 3x"]])
