@@ -661,3 +661,59 @@ def test_whole_numbers_up_to_2_53_and_nothing_else():
         assert _refusal(whole_numbers, np.array([1.0, bad]), "an index") == "an index is not a whole number"
     assert _refusal(whole_numbers, np.array([2.0**53 + 2]), "an index") == "an index is far out of range"
     assert _refusal(whole_numbers, np.array([-(2.0**53) - 2]), "an index") == "an index is far out of range"
+
+
+# --- PLY, ASCII faces ----------------------------------------------------------------------------
+
+_PLY_INDEX_LIST = b"property list uchar int vertex_indices\n"
+
+
+def _ascii_ply(face_properties: bytes, faces: bytes) -> bytes:
+    head = b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+    head += b"element face %d\n" % faces.count(b"\n") + face_properties + b"end_header\n"
+    return head + b"0 0 0\n1 0 0\n0 1 0\n0 0 1\n" + faces
+
+
+@pytest.mark.parametrize(
+    ("properties", "faces", "expected"),
+    [
+        (_PLY_INDEX_LIST, b"3 0 1 2\n4 0 1 2 3\n", [[0, 1, 2], [0, 1, 2], [0, 2, 3]]),
+        (b"property uchar flag\n" + _PLY_INDEX_LIST, b"7 3 0 1 2\n", [[0, 1, 2]]),  # a scalar first
+    ],
+)
+def test_ascii_ply_faces_are_read_after_their_scalar_properties(properties, faces, expected):
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    assert read_ply(_ascii_ply(properties, faces), Budget())[1].tolist() == expected
+
+
+@pytest.mark.parametrize(
+    ("properties", "faces", "message"),
+    [
+        (
+            b"property list uchar int foo\n" + _PLY_INDEX_LIST,
+            b"1 5 3 0 1 2\n",
+            "this PLY face layout (a list before the index list) is not supported",
+        ),
+        (_PLY_INDEX_LIST, b"3 0 x 2\n", "a PLY face line holds something that is not a number"),
+        (
+            b"property uchar flag\n" + _PLY_INDEX_LIST,
+            b"7\n",
+            "a PLY face line is shorter than its properties",
+        ),
+        (_PLY_INDEX_LIST, b"3.5 0 1 2\n", "a PLY face corner count is not a whole number"),
+        (_PLY_INDEX_LIST, b"2 0 1\n", "a PLY face line lists fewer corners than its count says (at least 3)"),
+        (
+            _PLY_INDEX_LIST,
+            b"4 0 1 2\n",
+            "a PLY face line lists fewer corners than its count says (at least 3)",
+        ),
+        (_PLY_INDEX_LIST, b"3 0 1 2.5\n", "a PLY face index is not a whole number"),
+    ],
+)
+def test_ascii_ply_face_refusals_in_words(properties, faces, message):
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_ply, _ascii_ply(properties, faces), Budget()) == message
