@@ -717,3 +717,46 @@ def test_ascii_ply_face_refusals_in_words(properties, faces, message):
     from app.core.meshdata import Budget
 
     assert _refusal(read_ply, _ascii_ply(properties, faces), Budget()) == message
+
+
+# --- PLY, binary faces ---------------------------------------------------------------------------
+
+
+def _binary_ply(face_count: int, faces: bytes) -> bytes:
+    import struct
+
+    head = b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+    head += (
+        b"property float z\nelement face %d\nproperty list uchar int vertex_indices\nend_header\n"
+        % face_count
+    )
+    return head + struct.pack("<12f", 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1) + faces
+
+
+def test_binary_ply_faces_of_mixed_sizes_are_fanned():
+    import struct
+
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    data = _binary_ply(2, struct.pack("<B3i", 3, 0, 1, 2) + struct.pack("<B4i", 4, 0, 1, 2, 3))
+    assert read_ply(data, Budget())[1].tolist() == [[0, 1, 2], [0, 1, 2], [0, 2, 3]]
+
+
+@pytest.mark.parametrize(
+    ("count", "faces", "message"),
+    [
+        (
+            3,
+            b"\x03",
+            "the PLY header declares 3 'face' elements, but only 1 bytes are left for them:"
+            " the file is truncated",
+        ),
+        (2, b"\x00\x00", "a PLY face has fewer than 3 corners"),  # ends exactly where empty lists would
+    ],
+)
+def test_binary_ply_face_refusals_in_words(count, faces, message):
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_ply, _binary_ply(count, faces), Budget()) == message
