@@ -259,3 +259,9 @@ def test_vertex_components_label_each_piece_and_a_vertex_in_no_face_alone():
     assert labels.dtype == np.int64 and labels.shape == (12,)
     groups = {frozenset(np.flatnonzero(labels == k).tolist()) for k in np.unique(labels)}
     assert groups == {frozenset(range(4)), frozenset(range(4, 8)), frozenset([8]), frozenset([9, 10, 11])}
+
+
+def test_vertex_components_label_a_last_vertex_in_no_face():
+    v = np.vstack([TETRA, [[9.0, 9.0, 9.0]]])
+    labels = cleaning.vertex_components(Mesh(v, TETRA_FACES))
+    assert labels.shape == (5,) and len(set(labels[:4].tolist())) == 1 and labels[4] != labels[0]
