@@ -760,3 +760,135 @@ def test_binary_ply_face_refusals_in_words(count, faces, message):
     from app.core.meshdata import Budget
 
     assert _refusal(read_ply, _binary_ply(count, faces), Budget()) == message
+
+
+# --- PLY, header and ASCII body ------------------------------------------------------------------
+
+_PLY_HEAD = b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+_PLY_VERTICES = b"0 0 0\n1 0 0\n0 1 0\n0 0 1\n"
+
+
+@pytest.mark.parametrize(
+    "data",
+    [
+        b"ply\ncomment\nobj_info x\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+        b"property float z\nelement face 1\n"
+        + _PLY_INDEX_LIST
+        + b"end_header\n"
+        + _PLY_VERTICES
+        + b"3 0 1 2\n",
+        b"ply\nformat ascii 1.0\nelement face 1\n" + _PLY_INDEX_LIST + b"element vertex 4\nproperty float x\n"
+        b"property float y\nproperty float z\nend_header\n3 0 1 2\n" + _PLY_VERTICES,  # faces first
+        _PLY_HEAD
+        + b"element edge 1\nproperty int vertex1\nproperty int vertex2\nelement face 1\n"
+        + _PLY_INDEX_LIST
+        + b"end_header\n"
+        + _PLY_VERTICES
+        + b"0 1\n3 0 1 2\n",  # an element between
+    ],
+)
+def test_ascii_ply_headers_with_comments_and_elements_in_any_order_are_read(data):
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    vertices, faces = read_ply(data, Budget())
+    assert vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]] and faces.tolist() == [[0, 1, 2]]
+
+
+def _ply_with_end_header_at(offset: int) -> bytes:
+    prefix = b"ply\nformat ascii 1.0\ncomment "
+    rest = (
+        b"\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 1\n"
+        + _PLY_INDEX_LIST
+    )
+    data = (
+        prefix
+        + b"a" * (offset - len(prefix) - len(rest))
+        + rest
+        + b"end_header\n"
+        + _PLY_VERTICES
+        + b"3 0 1 2\n"
+    )
+    assert data.find(b"end_header") == offset
+    return data
+
+
+def test_a_ply_header_may_end_at_1_mib_and_no_later():
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    assert read_ply(_ply_with_end_header_at(1 << 20), Budget())[1].tolist() == [[0, 1, 2]]
+    assert _refusal(read_ply, _ply_with_end_header_at((1 << 20) + 1), Budget()) == (
+        "could not read the file as PLY: the header has no 'end_header'"
+    )
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (b"PLX\nformat ascii 1.0\n", "could not read the file as PLY: it does not start with 'ply'"),
+        (_PLY_HEAD, "could not read the file as PLY: the header has no 'end_header'"),
+        (
+            _PLY_HEAD + b"element face 1\nproperty floaty w\n" + _PLY_INDEX_LIST + b"end_header\n",
+            "could not read the file as PLY: bad header line 'property floaty w'",
+        ),
+        (
+            _PLY_HEAD
+            + b"element face 1\nproperty "
+            + b"q" * 80
+            + b" w\n"
+            + _PLY_INDEX_LIST
+            + b"end_header\n",
+            "could not read the file as PLY: bad header line 'property " + "q" * 51 + "'",
+        ),
+        (
+            b"ply\nformat binary_middle_endian_with_a_very_long_name 1.0\nelement vertex 4\nend_header\n",
+            "could not read the file as PLY: unknown format 'binary_middle_endian_with_a_ve'",
+        ),
+        (
+            b"ply\nelement vertex 4\nproperty float x\nend_header\n",
+            "could not read the file as PLY: unknown format ''",
+        ),
+        (
+            _PLY_HEAD + b"element face 1\nproperty int a\nend_header\n" + _PLY_VERTICES + b"3\n",
+            "the PLY face element has no vertex index list",
+        ),
+        (
+            _PLY_HEAD
+            + b"element face 2\n"
+            + _PLY_INDEX_LIST
+            + b"end_header\n"
+            + _PLY_VERTICES
+            + b"3 0 1 2\n",
+            "the PLY header declares 6 element lines, but the file holds 5: it is truncated",
+        ),
+        (
+            _PLY_HEAD
+            + b"element face 1\n"
+            + _PLY_INDEX_LIST
+            + b"end_header\n"
+            + _PLY_VERTICES
+            + b"3 0 1 2\n3 0 1 3\n",
+            "the PLY header declares 5 element lines, but the file holds 6: the counts are wrong",
+        ),
+        (
+            _PLY_HEAD
+            + b"element face 1\n"
+            + _PLY_INDEX_LIST
+            + b"end_header\n0 x 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n",
+            "a PLY vertex line holds something that is not a number",
+        ),
+        (
+            _PLY_HEAD
+            + b"element face 1\n"
+            + _PLY_INDEX_LIST
+            + b"end_header\n0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n",
+            "a PLY vertex line does not hold one number per property",
+        ),
+    ],
+)
+def test_ply_header_and_ascii_body_refusals_in_words(data, message):
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_ply, data, Budget()) == message
