@@ -892,3 +892,51 @@ def test_ply_header_and_ascii_body_refusals_in_words(data, message):
     from app.core.meshdata import Budget
 
     assert _refusal(read_ply, data, Budget()) == message
+
+
+def _binary_ply_with_extras(padding: bytes = b"", vertex_bytes: int | None = None) -> bytes:
+    """Vertices with a colour byte, a texture element of lists to skip, faces with a flag byte first."""
+    import struct
+
+    head = (
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+        b"property float z\nproperty uchar red\nelement texture 2\nproperty list uchar float uv\n"
+        b"element face 2\n"
+        b"property uchar flags\nproperty list uchar int vertex_indices\nend_header\n"
+    )
+    vertices = b"".join(struct.pack("<3fB", *p, 7) for p in [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)])
+    if vertex_bytes is not None:
+        return head + vertices[:vertex_bytes]
+    texture = struct.pack("<B2f", 2, 0.5, 0.5) + struct.pack("<B", 0)
+    faces = struct.pack("<BB3i", 9, 3, 0, 1, 2) + struct.pack("<BB3i", 9, 3, 0, 2, 3)
+    return head + vertices + texture + faces + padding
+
+
+@pytest.mark.parametrize("padding", [b"", b"\x00" * 64])
+def test_binary_ply_skips_list_elements_reads_past_scalars_and_allows_64_bytes_of_padding(padding):
+    import numpy as np
+
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    vertices, faces = read_ply(_binary_ply_with_extras(padding), Budget())
+    assert vertices.dtype == np.float64 and vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
+    assert faces.dtype == np.int64 and faces.tolist() == [[0, 1, 2], [0, 2, 3]]
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (_binary_ply_with_extras(b"\x00" * 65), "the PLY file holds 65 bytes more than its header declares"),
+        (
+            _binary_ply_with_extras(vertex_bytes=20),
+            "the PLY header declares 4 'vertex' elements, but only 20 bytes are left for them:"
+            " the file is truncated",
+        ),
+    ],
+)
+def test_binary_ply_size_refusals_in_words(data, message):
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_ply, data, Budget()) == message
