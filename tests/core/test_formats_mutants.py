@@ -940,3 +940,215 @@ def test_binary_ply_size_refusals_in_words(data, message):
     from app.core.meshdata import Budget
 
     assert _refusal(read_ply, data, Budget()) == message
+
+
+# --- PLY, binary reader edge cases (fifth pass) --------------------------------------------------
+
+
+def _ply_bytes(
+    vertices: list[tuple[float, float, float]], face_decl: bytes, faces: bytes, count: int
+) -> bytes:
+    """Binary little-endian PLY: float x, y, z vertices, then a face element declared by face_decl."""
+    import struct
+
+    head = (
+        b"ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\n"
+        % len(vertices)
+    )
+    head += b"property float z\nelement face %d\n%send_header\n" % (count, face_decl)
+    return head + b"".join(struct.pack("<3f", *v) for v in vertices) + faces
+
+
+_TRIANGLE = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0)]
+_UCHAR_INT = b"property list uchar int vertex_indices\n"
+
+
+def test_a_binary_ply_whose_vertex_bytes_spell_end_header_is_read():
+    import struct
+
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    odd = struct.unpack("<3f", b"end_header\x00\x00")  # the header ends at the first end_header
+    data = _ply_bytes([*_TRIANGLE, odd], _UCHAR_INT, struct.pack("<B3i", 3, 0, 1, 3), 1)
+    vertices, faces = read_ply(data, Budget())
+    assert vertices.tolist()[3] == list(odd) and faces.tolist() == [[0, 1, 3]]
+
+
+def test_an_ascii_ply_ending_at_end_header_has_no_element_lines():
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    data = _PLY_HEAD + b"element face 1\n" + _PLY_INDEX_LIST + b"end_header"
+    assert _refusal(read_ply, data, Budget()) == (
+        "the PLY header declares 5 element lines, but the file holds 0: it is truncated"
+    )
+
+
+def test_binary_ply_vertices_last_may_end_exactly_at_the_end_of_the_file():
+    import struct
+
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    data = (
+        b"ply\nformat binary_little_endian 1.0\nelement face 1\n"
+        + _UCHAR_INT
+        + b"element vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+        + struct.pack("<B3i", 3, 0, 1, 2)
+        + b"".join(struct.pack("<3f", *v) for v in _TRIANGLE)
+    )
+    vertices, faces = read_ply(data, Budget())
+    assert vertices.tolist() == [list(v) for v in _TRIANGLE] and faces.tolist() == [[0, 1, 2]]
+
+
+def test_binary_ply_with_no_byte_after_the_header_says_0_bytes():
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_ply, _binary_ply_with_extras(vertex_bytes=0), Budget()) == (
+        "the PLY header declares 4 'vertex' elements, but only 0 bytes are left for them:"
+        " the file is truncated"
+    )
+
+
+@pytest.mark.parametrize(
+    ("decl", "faces", "count", "message"),
+    [
+        (  # 4 faces of at least a 4-byte count each cannot fit in 8 bytes
+            b"property list int int vertex_indices\n",
+            b"\x03\x00\x00\x00\x00\x00\x00\x00",
+            4,
+            "the PLY header declares 4 'face' elements, but only 8 bytes are left for them:"
+            " the file is truncated",
+        ),
+        (  # one face whose indices are cut short
+            _UCHAR_INT,
+            b"\x03\x00\x00\x00\x00",
+            1,
+            "the PLY header declares 1 'face' elements, but only 5 bytes are left for them:"
+            " the file is truncated",
+        ),
+        (  # mixed sizes (the record walk), the second face with 2 corners
+            _UCHAR_INT,
+            b"\x03" + b"\x00" * 12 + b"\x02" + b"\x00" * 8,
+            2,
+            "a PLY face has fewer than 3 corners",
+        ),
+    ],
+)
+def test_binary_ply_face_truncation_and_corner_refusals_in_words(decl, faces, count, message):
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_ply, _ply_bytes(_TRIANGLE, decl, faces, count), Budget()) == message
+
+
+def test_binary_ply_mixed_size_faces_are_int64():
+    import struct
+
+    import numpy as np
+
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    data = _binary_ply(2, struct.pack("<B3i", 3, 0, 1, 2) + struct.pack("<B4i", 4, 0, 1, 2, 3))
+    faces = read_ply(data, Budget())[1]
+    assert faces.dtype == np.int64 and faces.tolist() == [[0, 1, 2], [0, 1, 2], [0, 2, 3]]
+
+
+def test_a_binary_ply_of_one_triangle_and_nothing_after_it_is_read():
+    import struct
+
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    data = _ply_bytes(_TRIANGLE, _UCHAR_INT, struct.pack("<B3i", 3, 0, 1, 2), 1)
+    assert read_ply(data, Budget())[1].tolist() == [[0, 1, 2]]
+
+
+def test_a_binary_ply_face_with_a_scalar_equal_to_its_corner_count_is_read():
+    import struct
+
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    decl = b"property uchar flags\n" + _UCHAR_INT
+    data = _ply_bytes(_TRIANGLE, decl, struct.pack("<BB3i", 3, 3, 0, 1, 2), 1)
+    assert read_ply(data, Budget())[1].tolist() == [[0, 1, 2]]
+
+
+def test_a_binary_ply_face_of_112_corners_is_fanned_from_its_own_bytes():
+    import math
+
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    ring = [(math.cos(i / 18), math.sin(i / 18), 0.0) for i in range(112)]  # 112 == ord("p"), as "ply"
+    data = _ply_bytes(ring, b"property list uchar uchar vertex_indices\n", bytes([112, *range(112)]), 1)
+    faces = read_ply(data, Budget())[1]
+    assert faces.tolist() == [[0, i, i + 1] for i in range(1, 111)]
+
+
+# --- glTF buffers (fifth pass) -------------------------------------------------------------------
+
+_SMALL_BUDGET = SimpleNamespace(unpacked_bytes=lambda: 30)  # what _buffers asks of a Budget
+
+
+def _gltf_buffers(buffers, chunk=None, files=None, what="glTF"):
+    from app.core.formats.gltf import _buffers
+
+    return _buffers({"buffers": buffers} if buffers is not None else {}, chunk, files, what, _SMALL_BUDGET)
+
+
+def test_gltf_buffers_from_data_uris_chunks_and_files():
+    assert _gltf_buffers(None) == []  # no "buffers" at all: none
+    assert _gltf_buffers([{"byteLength": 3}], chunk=b"abc", what="GLB") == [b"abc"]  # exactly its length
+    # base64 past a comma or a line break: the characters outside the alphabet are dropped
+    assert _gltf_buffers([{"uri": "data:;base64,AAAA,AAAA"}]) == [b"\x00" * 6]
+    assert _gltf_buffers([{"uri": "data:;base64,AAAA\nAAAA"}]) == [b"\x00" * 6]
+    assert _gltf_buffers([{"uri": "x.bin"}], files={"x.bin": b"xyz"}.__getitem__) == [b"xyz"]
+
+
+def test_a_gltf_data_uri_may_be_up_to_the_unpacked_budget():
+    uri = "data:;base64," + "A" * 28  # 41 characters: 41 * 3 // 4 == 30 (30.75 unrounded)
+    assert _gltf_buffers([{"uri": uri}]) == [b"\x00" * 21]
+    assert _refusal(_gltf_buffers, [{"uri": uri + "AA"}]) == "the glTF buffer 0 is larger than allowed"
+
+
+@pytest.mark.parametrize(
+    ("buffers", "chunk", "what", "message"),
+    [
+        ([{"byteLength": 1}], None, "glTF", "the glTF buffer 0 has no data (no URI and no binary chunk)"),
+        (
+            [{"byteLength": 1}, {"byteLength": 1}],
+            b"a",
+            "GLB",
+            "the GLB buffer 1 has no data (no URI and no binary chunk)",
+        ),
+        ([{"uri": "data:AAAA"}], None, "glTF", "the glTF buffer 0 has a malformed data: URI"),
+        ([{"uri": "data:;base64,AAA"}], None, "glTF", "the glTF buffer 0 has a malformed data: URI"),
+        (
+            [{"uri": "x.bin"}],
+            None,
+            "glTF",
+            "the glTF refers to an external file 'x.bin'; upload a .zip holding both,"
+            " or a self-contained .gltf or GLB",
+        ),
+        (
+            [{"uri": "y" * 100}],
+            b"",
+            "GLB",
+            "the GLB refers to an external file '" + "y" * 80 + "'; upload a .zip holding both,"
+            " or a self-contained GLB",
+        ),
+        (
+            [{"byteLength": 4}],
+            b"abc",
+            "GLB",
+            "the GLB buffer 0 declares 4 bytes, but holds 3: it is truncated",
+        ),
+    ],
+)
+def test_gltf_buffer_refusals_in_words(buffers, chunk, what, message):
+    assert _refusal(_gltf_buffers, buffers, chunk, None, what) == message
