@@ -1152,3 +1152,42 @@ def test_a_gltf_data_uri_may_be_up_to_the_unpacked_budget():
 )
 def test_gltf_buffer_refusals_in_words(buffers, chunk, what, message):
     assert _refusal(_gltf_buffers, buffers, chunk, None, what) == message
+
+
+def test_a_binary_ply_face_record_missing_entirely_is_truncated_in_words():
+    import struct
+
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    data = _ply_bytes(_TRIANGLE, _UCHAR_INT, struct.pack("<B3i", 3, 0, 1, 2), 2)  # the second face is absent
+    assert _refusal(read_ply, data, Budget()) == (
+        "the PLY header declares 2 'face' elements, but only 13 bytes are left for them:"
+        " the file is truncated"
+    )
+
+
+@pytest.mark.parametrize(
+    ("vertex_properties", "vertex_lines"),
+    [
+        (b"property float x\nproperty float y\nproperty float w\n", b"0 0 0\n1 0 0\n0 1 0\n"),  # no z
+        (  # a list among the vertex properties
+            b"property float x\nproperty float y\nproperty float z\nproperty list uchar int extra\n",
+            b"0 0 0 0\n1 0 0 0\n0 1 0 0\n",
+        ),
+    ],
+)
+def test_a_ply_vertex_element_without_xyz_or_with_a_list_is_refused_in_words(vertex_properties, vertex_lines):
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    data = (
+        b"ply\nformat ascii 1.0\nelement vertex 3\n"
+        + vertex_properties
+        + b"element face 1\n"
+        + _PLY_INDEX_LIST
+        + b"end_header\n"
+        + vertex_lines
+        + b"3 0 1 2\n"
+    )
+    assert _refusal(read_ply, data, Budget()) == "the PLY vertex element has no x, y, z properties"
