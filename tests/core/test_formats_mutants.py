@@ -1191,3 +1191,80 @@ def test_a_ply_vertex_element_without_xyz_or_with_a_list_is_refused_in_words(ver
         + b"3 0 1 2\n"
     )
     assert _refusal(read_ply, data, Budget()) == "the PLY vertex element has no x, y, z properties"
+
+
+def _ascii_ply_with_edges(count: bytes) -> bytes:
+    return (
+        _PLY_HEAD
+        + b"element edge "
+        + count
+        + b"\nproperty int a\nelement face 1\n"
+        + _PLY_INDEX_LIST
+        + b"end_header\n"
+        + _PLY_VERTICES
+        + b"3 0 1 2\n"
+    )
+
+
+def test_a_ply_element_may_declare_up_to_64_per_byte_of_the_file():
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    size = len(_ascii_ply_with_edges(b"00000"))
+    assert 10000 <= 64 * size < 100000  # five digits either way
+    assert _refusal(read_ply, _ascii_ply_with_edges(b"%d" % (64 * size)), Budget()) == (
+        f"the PLY header declares {64 * size + 5} element lines, but the file holds 5: it is truncated"
+    )
+    assert _refusal(read_ply, _ascii_ply_with_edges(b"%d" % (64 * size + 1)), Budget()) == (
+        f"the PLY header declares {64 * size + 1} 'edge' elements: corrupt"
+    )
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (
+            b"ply\nformat ascii 1.0\nelement face 1\n" + _PLY_INDEX_LIST + b"end_header\n3 0 1 2\n",
+            "the mesh has no vertices (the PLY file has no 'vertex' element)",
+        ),
+        (
+            _PLY_HEAD + b"end_header\n" + _PLY_VERTICES,
+            "the mesh has no faces (a point cloud is not a surface)",
+        ),
+        (
+            _PLY_HEAD + b"element face 0\n" + _PLY_INDEX_LIST + b"end_header\n" + _PLY_VERTICES,
+            "the mesh has no faces (a point cloud is not a surface)",
+        ),
+        (
+            b"ply\nformat ascii 1.0\nelement vertex -1\nend_header\n",
+            "the file is corrupt: the PLY header declares a negative count",
+        ),
+        (
+            _PLY_HEAD + b"element face -1\n" + _PLY_INDEX_LIST + b"end_header\n",
+            "the file is corrupt: the PLY header declares a negative count",
+        ),
+    ],
+)
+def test_ply_element_refusals_in_words(data, message):
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_ply, data, Budget()) == message
+
+
+def test_ply_declared_counts_are_checked_against_the_budget_in_words():
+    from app.core.formats.ply import read_ply
+    from app.core.meshdata import FACE_FACTOR, RAW_VERTEX_FACTOR, Budget
+
+    budget = Budget(max_vertices=1)
+    many = RAW_VERTEX_FACTOR + 1
+    head = b"ply\nformat ascii 1.0\nelement vertex %d\nproperty float x\nproperty float y\nproperty float z\n"
+    assert _refusal(read_ply, head % many + b"end_header\n", budget) == (
+        f"the PLY header declares {many} vertices: far more than the limit of 1 vertices could hold"
+        " even after welding duplicates"
+    )
+    faces = FACE_FACTOR + 1
+    data = head % 3 + b"element face %d\n" % faces + _PLY_INDEX_LIST + b"end_header\n"
+    assert _refusal(read_ply, data, budget) == (
+        f"the PLY header declares {faces} faces: far more than a mesh within the limit of 1 vertices can have"
+    )
