@@ -1268,3 +1268,38 @@ def test_ply_declared_counts_are_checked_against_the_budget_in_words():
     assert _refusal(read_ply, data, budget) == (
         f"the PLY header declares {faces} faces: far more than a mesh within the limit of 1 vertices can have"
     )
+
+
+# --- glTF canonical GLB (fifth pass) -------------------------------------------------------------
+
+
+def test_the_canonical_glb_is_a_well_formed_glb_with_8_byte_aligned_buffers():
+    import json
+    import struct
+
+    from app.core.formats.gltf import _canonical_glb
+
+    doc = {
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "material": 0}]}],
+        "materials": [{}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 1, "byteLength": 2},
+            {"buffer": 1, "byteLength": 5},
+            {"buffer": 2, "byteOffset": 2, "byteLength": 1},
+        ],
+    }
+    buffers = [b"abc", b"defgh", b"ijklmnopq"]
+    glb = _canonical_glb(doc, buffers)
+    magic, version, length = struct.unpack_from("<4sII", glb)
+    assert (magic, version, length) == (b"glTF", 2, len(glb))
+    json_length, json_type = struct.unpack_from("<II", glb, 12)
+    assert json_type == 0x4E4F534A and json_length % 4 == 0
+    out = json.loads(glb[20 : 20 + json_length])
+    bin_at = 20 + json_length
+    bin_length, bin_type = struct.unpack_from("<II", glb, bin_at)
+    assert bin_type == 0x004E4942 and bin_length % 4 == 0 and bin_at + 8 + bin_length == len(glb)
+    blob = glb[bin_at + 8 :]
+    assert blob == b"abc" + b"\0" * 5 + b"defgh" + b"\0" * 3 + b"ijklmnopq" + b"\0" * 3
+    assert out["buffers"] == [{"byteLength": 25}]
+    assert [(v["buffer"], v["byteOffset"]) for v in out["bufferViews"]] == [(0, 1), (0, 8), (0, 18)]
+    assert "materials" not in out and out["meshes"][0]["primitives"] == [{"attributes": {"POSITION": 0}}]
