@@ -1303,3 +1303,16 @@ def test_the_canonical_glb_is_a_well_formed_glb_with_8_byte_aligned_buffers():
     assert out["buffers"] == [{"byteLength": 25}]
     assert [(v["buffer"], v["byteOffset"]) for v in out["bufferViews"]] == [(0, 1), (0, 8), (0, 18)]
     assert "materials" not in out and out["meshes"][0]["primitives"] == [{"attributes": {"POSITION": 0}}]
+
+
+def test_a_canonical_glb_of_a_document_without_views_or_meshes_has_no_binary_chunk():
+    import json
+    import struct
+
+    from app.core.formats.gltf import _canonical_glb
+
+    glb = _canonical_glb({"asset": {"version": "2.0"}}, [])
+    json_length, json_type = struct.unpack_from("<II", glb, 12)
+    assert len(glb) == 20 + json_length and struct.unpack_from("<I", glb, 8)[0] == len(glb)
+    out = json.loads(glb[20:])
+    assert out == {"asset": {"version": "2.0"}, "bufferViews": [], "buffers": [], "meshes": []}
