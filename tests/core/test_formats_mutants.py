@@ -1316,3 +1316,207 @@ def test_a_canonical_glb_of_a_document_without_views_or_meshes_has_no_binary_chu
     assert len(glb) == 20 + json_length and struct.unpack_from("<I", glb, 8)[0] == len(glb)
     out = json.loads(glb[20:])
     assert out == {"asset": {"version": "2.0"}, "bufferViews": [], "buffers": [], "meshes": []}
+
+
+# --- glTF checks before any array is read (fifth pass) -------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["EXT_meshopt_compression", "KHR_meshopt_compression"])
+@pytest.mark.parametrize("key", ["extensionsUsed", "extensionsRequired"])
+def test_meshopt_is_refused_whether_used_or_required_naming_the_extension(name, key):
+    from app.core.formats.gltf import _check_extensions
+    from app.core.meshdata import UnsupportedFormatError
+
+    with pytest.raises(UnsupportedFormatError) as info:
+        _check_extensions({key: ["KHR_draco_mesh_compression", name]})
+    assert str(info.value) == (
+        f"unsupported mesh format: meshopt-compressed glTF ({name}) is not supported:"
+        " export it without meshopt compression (Draco is fine), or as OBJ, PLY, STL, GLB or 3MF"
+    )
+
+
+def test_gpu_instancing_is_refused_only_when_required():
+    from app.core.formats.gltf import _check_extensions
+    from app.core.meshdata import UnsupportedFormatError
+
+    _check_extensions({})
+    _check_extensions({"extensionsUsed": ["EXT_mesh_gpu_instancing", "KHR_draco_mesh_compression"]})
+    with pytest.raises(UnsupportedFormatError) as info:
+        _check_extensions({"extensionsRequired": ["KHR_draco_mesh_compression", "EXT_mesh_gpu_instancing"]})
+    assert str(info.value) == (
+        "unsupported mesh format: GPU instancing (EXT_mesh_gpu_instancing) is not supported:"
+        " apply the instances and export again"
+    )
+
+
+_VIEW_PAST = "a glTF buffer view runs past the end of its buffer: the file is corrupt"
+
+
+def test_gltf_buffer_views_must_lie_inside_their_buffer():
+    from app.core.formats.gltf import _check_views
+
+    buffers = [b"", b"x" * 10]
+    _check_views({}, buffers)
+    _check_views({"bufferViews": [{"buffer": 1, "byteOffset": 4, "byteLength": 6}]}, buffers)
+    _check_views({"bufferViews": [{"buffer": 1, "byteLength": 10}]}, buffers)
+    for view in (
+        {"buffer": 1, "byteOffset": 4, "byteLength": 7},
+        {"buffer": 1, "byteLength": 11},
+        {"buffer": 1, "byteOffset": -1, "byteLength": 1},
+        {"buffer": 0, "byteLength": 1},
+    ):
+        assert _refusal(_check_views, {"bufferViews": [view]}, buffers) == _VIEW_PAST
+
+
+def _accessor_doc(accessor: dict, view_length: int, stride: int | None = None) -> dict:
+    view = {"buffer": 0, "byteLength": view_length}
+    if stride is not None:
+        view["byteStride"] = stride
+    return {"bufferViews": [view], "accessors": [dict(accessor, bufferView=0)]}
+
+
+def test_gltf_accessors_must_fit_their_view_for_every_component_type_and_width():
+    from app.core.formats.gltf import _check_views
+
+    sizes = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+    widths = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+    buffers = [b"\0" * 1024]
+    for component, size in sizes.items():
+        for kind, width in widths.items():
+            accessor = {"componentType": component, "type": kind, "count": 1}
+            _check_views(_accessor_doc(accessor, size * width), buffers)
+            assert _refusal(_check_views, _accessor_doc(accessor, size * width - 1), buffers) == (
+                f"a glTF accessor declares 1 elements ({size * width} bytes), more than its buffer view"
+                f" holds ({size * width - 1} bytes): the file is corrupt"
+            )
+
+
+def test_gltf_accessor_sizes_count_the_offset_and_the_stride():
+    from app.core.formats.gltf import _check_views
+
+    buffers = [b"\0" * 1024]
+    accessor = {"componentType": 5126, "type": "VEC3", "count": 2, "byteOffset": 4}
+    _check_views(_accessor_doc(accessor, 28), buffers)  # 4 + 12 + 12
+    _check_views(_accessor_doc(accessor, 28, stride=0), buffers)  # a stride of 0: packed
+    assert _refusal(_check_views, _accessor_doc(accessor, 27), buffers) == (
+        "a glTF accessor declares 2 elements (28 bytes), more than its buffer view holds (27 bytes):"
+        " the file is corrupt"
+    )
+    _check_views(_accessor_doc(accessor, 32, stride=16), buffers)  # 4 + 16 + 12
+    assert _refusal(_check_views, _accessor_doc(accessor, 31, stride=16), buffers) == (
+        "a glTF accessor declares 2 elements (32 bytes), more than its buffer view holds (31 bytes):"
+        " the file is corrupt"
+    )
+
+
+def test_gltf_accessors_without_a_view_or_elements_are_not_measured_and_negative_counts_refused():
+    from app.core.formats.gltf import _check_views
+
+    buffers = [b""]
+    _check_views({"accessors": [{"componentType": 5126, "type": "VEC3", "count": 5}]}, buffers)
+    _check_views({"accessors": [{"bufferView": 7, "componentType": 1, "type": "?", "count": 0}]}, buffers)
+    assert _refusal(_check_views, {"accessors": [{"count": -1}]}, buffers) == (
+        "a glTF accessor has a negative count: the file is corrupt"
+    )
+
+
+def _recorder():
+    calls = []
+    budget = SimpleNamespace(
+        vertices=lambda n, what: calls.append(("vertices", n, what)),
+        faces=lambda n, what: calls.append(("faces", n, what)),
+    )
+    return budget, calls
+
+
+_SCENE = "the glTF scene (each mesh counted once per node that places it)"
+
+
+def test_gltf_counts_each_mesh_once_per_node_that_places_it():
+    from app.core.formats.gltf import _check_counts
+
+    doc = {
+        "accessors": [{"count": 4}, {"count": 7}, {"count": 5}],
+        "meshes": [
+            {"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]},  # 4 vertices, 7 // 3 faces
+            {"primitives": [{"attributes": {"POSITION": 2}}, {"attributes": {"POSITION": 2}}]},  # 10, 2 x 1
+        ],
+        "nodes": [{"mesh": 0, "children": [1, 1]}, {"mesh": 1}, {"mesh": 0}, {}],
+    }
+    budget, calls = _recorder()
+    _check_counts(doc, budget)
+    # roots 0, 2 and 3 (no scene); node 1 is placed twice through node 0
+    assert calls == [("vertices", 4 + 2 * 10 + 4, _SCENE), ("faces", 2 + 2 * 2 + 2, _SCENE)]
+
+
+@pytest.mark.parametrize(
+    ("positions", "indices", "message"),
+    [
+        (10**9, None, None),
+        (10**9 + 1, None, "the glTF scene expands to 1000000001 vertices through its node instances"),
+        (3, 3 * 10**9, None),
+        (3, 3 * 10**9 + 3, "the glTF scene expands to 3 vertices through its node instances"),
+    ],
+)
+def test_gltf_scenes_may_expand_to_a_billion_vertices_or_faces_and_no_more(positions, indices, message):
+    from app.core.formats.gltf import _check_counts
+
+    primitive = {"attributes": {"POSITION": 0}}
+    accessors = [{"count": positions}]
+    if indices is not None:
+        primitive["indices"] = 1
+        accessors.append({"count": indices})
+    doc = {"accessors": accessors, "meshes": [{"primitives": [primitive]}], "nodes": [{"mesh": 0}]}
+    budget, calls = _recorder()
+    if message is None:
+        _check_counts(doc, budget)
+        assert [c[1] for c in calls] == [positions, (indices or positions) // 3]
+    else:
+        assert _refusal(_check_counts, doc, budget) == message
+
+
+def test_gltf_instances_follow_the_chosen_scene_and_multiply_shared_children():
+    from app.core.formats.gltf import MAX_INSTANCES, _instances
+
+    nodes = [{"children": [1, 1]}, {"children": [2, 2]}, {}]
+    assert _instances({"nodes": nodes, "scenes": [{"nodes": [0]}]}) == [1, 2, 4]
+    assert _instances({"nodes": nodes, "scenes": [{"nodes": [1]}, {"nodes": [0]}]}) == [0, 1, 2]
+    assert _instances({"nodes": nodes, "scenes": [{"nodes": [1]}, {"nodes": [0]}], "scene": 1}) == [1, 2, 4]
+    assert _instances({"nodes": nodes, "scenes": [{}]}) == [0, 0, 0]
+    assert _instances({"nodes": nodes}) == [1, 2, 4]  # no scene: the unparented nodes are the roots
+    assert _instances({}) == []
+    chain = [{"children": [i + 1, i + 1]} for i in range(40)] + [{}]
+    assert _instances({"nodes": chain})[-1] == MAX_INSTANCES + 1  # capped, not 2 ** 40
+
+
+@pytest.mark.parametrize(
+    "nodes", [[{"children": [1]}, {"children": [0]}], [{"children": [0]}], [{}, {"children": [1]}]]
+)
+def test_a_gltf_node_cycle_is_refused_in_words(nodes):
+    from app.core.formats.gltf import _instances
+
+    assert (
+        _refusal(_instances, {"nodes": nodes}) == "the glTF node hierarchy has a cycle: the file is corrupt"
+    )
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (b"{", "could not read the file as glTF: its JSON is invalid"),
+        (b"\xff{}", "could not read the file as glTF: its JSON is invalid"),
+        (b"[" * 100000 + b"]" * 100000, "could not read the file as glTF: its JSON is invalid"),
+        (b"[]", "could not read the file as glTF: its JSON is not an object"),
+        (b"\xef\xbb\xbf{}", "the glTF file holds no triangle mesh (it has no meshes)"),  # a BOM is fine
+        (b'{"meshes": []}', "the glTF file holds no triangle mesh (it has no meshes)"),
+        (
+            b'{"meshes": [{"primitives": [{"attributes": {}}]}]}',
+            "could not read the file as glTF: its JSON structure is invalid",
+        ),
+    ],
+)
+def test_gltf_json_refusals_in_words(data, message):
+    from app.core.formats.gltf import read_gltf
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_gltf, data, Budget()) == message
