@@ -1520,3 +1520,73 @@ def test_gltf_json_refusals_in_words(data, message):
     from app.core.meshdata import Budget
 
     assert _refusal(read_gltf, data, Budget()) == message
+
+
+# --- GLB container (fifth pass) ------------------------------------------------------------------
+
+
+def _glb_of(*chunks: tuple[int, bytes], version: int = 2, extra: int = 0) -> bytes:
+    import struct
+
+    body = b"".join(struct.pack("<II", len(data), kind) + data for kind, data in chunks)
+    return b"glTF" + struct.pack("<II", version, 12 + len(body) + extra) + body
+
+
+_J, _B = 0x4E4F534A, 0x004E4942
+
+
+def test_glb_chunks_first_json_and_first_binary_with_or_without_padding():
+    from app.core.formats.gltf import _split_glb
+
+    doc, chunk = _split_glb(_glb_of((_J, b'{"a": 1}'), (7, b"skip"), (_B, b"bin!"), (_J, b"{}"), (_B, b"no")))
+    assert doc == {"a": 1} and chunk == b"bin!"
+    assert _split_glb(_glb_of((_J, b"{}  "))) == ({}, None)
+    # a 2-byte JSON chunk and the binary chunk right after it (padding omitted), or after 2 bytes of it
+    assert _split_glb(_glb_of((_J, b"{}"), (_B, b"xyz"))) == ({}, b"xyz")
+    padded = _glb_of((_J, b"{}")) + b"  " + _glb_of((_B, b"xyz"))[12:]
+    padded = padded[:8] + len(padded).to_bytes(4, "little") + padded[12:]
+    assert _split_glb(padded) == ({}, b"xyz")
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (
+            b"glTF" + b"\x02\0\0\0" + b"\x13\0\0\0" + b"\0" * 7,
+            "could not read the file as GLB: it does not start with 'glTF'",
+        ),
+        (
+            b"glTX" + b"\x02\0\0\0" + b"\x14\0\0\0" + b"\0" * 8,
+            "could not read the file as GLB: it does not start with 'glTF'",
+        ),
+        (_glb_of((_J, b"")), "could not read the file as GLB: its JSON is invalid"),  # 20 bytes: read
+        (
+            _glb_of((_J, b"{}"), extra=2),
+            "the GLB header declares 24 bytes, but the file holds 22: it is corrupt",
+        ),
+        (_glb_of((_J, b"{}"))[:-1], "the GLB header declares 22 bytes, but the file holds 21: it is corrupt"),
+        (_glb_of((_B, b"1234")), "could not read the file as GLB: it has no JSON chunk"),
+        (
+            _glb_of((_J, b"{}"), (_B, b""))[: -0 or None],
+            "the GLB file holds no triangle mesh (it has no meshes)",
+        ),
+    ],
+)
+def test_glb_container_refusals_in_words(data, message):
+    from app.core.formats.gltf import read_glb
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_glb, data, Budget()) == message
+
+
+def test_a_glb_chunk_past_the_end_and_glb_1_are_refused_in_words():
+    import struct
+
+    from app.core.formats.gltf import read_glb
+    from app.core.meshdata import Budget, UnsupportedFormatError
+
+    cut = b"glTF" + struct.pack("<II", 2, 24) + struct.pack("<II", 5, _J) + b"{}  "  # 5 declared, 4 there
+    assert _refusal(read_glb, cut, Budget()) == "a GLB chunk runs past the end of the file: it is truncated"
+    with pytest.raises(UnsupportedFormatError) as info:
+        read_glb(_glb_of((_J, b"{}"), version=1), Budget())
+    assert str(info.value) == "unsupported mesh format: glTF 1.0 is not supported: export glTF 2.0"
