@@ -1567,7 +1567,7 @@ def test_glb_chunks_first_json_and_first_binary_with_or_without_padding():
         (_glb_of((_J, b"{}"))[:-1], "the GLB header declares 22 bytes, but the file holds 21: it is corrupt"),
         (_glb_of((_B, b"1234")), "could not read the file as GLB: it has no JSON chunk"),
         (
-            _glb_of((_J, b"{}"), (_B, b""))[: -0 or None],
+            _glb_of((_J, b"{}"), (_B, b"")),
             "the GLB file holds no triangle mesh (it has no meshes)",
         ),
     ],
