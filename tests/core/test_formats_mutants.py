@@ -1590,3 +1590,8 @@ def test_a_glb_chunk_past_the_end_and_glb_1_are_refused_in_words():
     with pytest.raises(UnsupportedFormatError) as info:
         read_glb(_glb_of((_J, b"{}"), version=1), Budget())
     assert str(info.value) == "unsupported mesh format: glTF 1.0 is not supported: export glTF 2.0"
+
+
+def test_a_gltf_buffer_without_a_byte_length_may_be_empty():
+    assert _gltf_buffers([{"uri": "data:;base64,"}]) == [b""]
+    assert _gltf_buffers([{}], chunk=b"", what="GLB") == [b""]
