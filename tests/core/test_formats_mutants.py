@@ -1595,3 +1595,96 @@ def test_a_glb_chunk_past_the_end_and_glb_1_are_refused_in_words():
 def test_a_gltf_buffer_without_a_byte_length_may_be_empty():
     assert _gltf_buffers([{"uri": "data:;base64,"}]) == [b""]
     assert _gltf_buffers([{}], chunk=b"", what="GLB") == [b""]
+
+
+# --- glTF in a .zip (fifth pass) -----------------------------------------------------------------
+
+
+def _tetra_gltf(uri: str) -> bytes:
+    import json
+
+    return json.dumps(
+        {
+            "asset": {"version": "2.0"},
+            "buffers": [{"byteLength": 72, "uri": uri}],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": 48},
+                {"buffer": 0, "byteOffset": 48, "byteLength": 24},
+            ],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3"},
+                {"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"},
+            ],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+            "nodes": [{"mesh": 0}],
+            "scenes": [{"nodes": [0]}],
+        }
+    ).encode()
+
+
+def _tetra_bin() -> bytes:
+    import numpy as np
+
+    blob = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], "<f4").tobytes()
+    return blob + np.array([0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3], "<u2").tobytes()
+
+
+def test_a_zip_with_one_gltf_beside_mac_leftovers_and_folders_reads_its_files_relative_to_it():
+    from app.core.formats.gltf import read_zip
+    from app.core.meshdata import Budget
+
+    data = _zip(
+        {
+            "m/": b"",
+            "__MACOSX/m/._a.gltf": b"junk",
+            "m/._b.GLTF": b"junk",
+            "m/sub/a.GLTF": _tetra_gltf("../bin/t%20x.bin"),
+            "m/bin/t x.bin": _tetra_bin(),
+        }
+    )
+    vertices, faces = read_zip(data, Budget())
+    assert len(vertices) == 4 and len(faces) == 4
+
+
+@pytest.mark.parametrize(
+    ("members", "message"),
+    [
+        (
+            {"a.txt": b"x", "d.gltf/": b""},
+            "the .zip holds no .gltf or .glb file (a .zip upload is a glTF with its files)",
+        ),
+        (
+            {f"m{i}.glb": b"x" for i in range(6)},
+            "the .zip holds several models (m0.glb, m1.glb, m2.glb, m3.glb, m4.glb): upload one per file",
+        ),
+        ({"a.gltf": _tetra_gltf("t.bin")}, "the glTF refers to 't.bin', which is not in the .zip"),
+        (
+            {"a.gltf": _tetra_gltf("u" * 100)},
+            "the glTF refers to '" + "u" * 80 + "', which is not in the .zip",
+        ),
+        ({"a.glb": b"glTF"}, "could not read the file as GLB: it does not start with 'glTF'"),
+        ({"a.gltf": b"[]"}, "could not read the file as glTF: its JSON is not an object"),
+    ],
+)
+def test_zip_refusals_in_words(members, message):
+    from app.core.formats.gltf import read_zip
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_zip, _zip(members), Budget()) == message
+
+
+def test_a_glb_in_a_zip_uses_its_binary_chunk():
+    import json
+    import struct
+
+    from app.core.formats.gltf import read_zip
+    from app.core.meshdata import Budget
+
+    doc = json.loads(_tetra_gltf(""))
+    del doc["buffers"][0]["uri"]
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    body = struct.pack("<II", len(text), _J) + text + struct.pack("<II", 72, _B) + _tetra_bin()
+    glb = b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body
+    vertices, faces = read_zip(_zip({"x/model.glb": glb}), Budget())
+    assert len(vertices) == 4 and len(faces) == 4
