@@ -1688,3 +1688,11 @@ def test_a_glb_in_a_zip_uses_its_binary_chunk():
     glb = b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body
     vertices, faces = read_zip(_zip({"x/model.glb": glb}), Budget())
     assert len(vertices) == 4 and len(faces) == 4
+
+
+def test_a_gltf_mesh_without_primitives_counts_nothing():
+    from app.core.formats.gltf import _check_counts
+
+    budget, calls = _recorder()
+    _check_counts({"meshes": [{}], "nodes": [{"mesh": 0}, {"mesh": 0}]}, budget)
+    assert calls == [("vertices", 0, _SCENE), ("faces", 0, _SCENE)]
