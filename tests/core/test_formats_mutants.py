@@ -1282,6 +1282,9 @@ def test_the_canonical_glb_is_a_well_formed_glb_with_8_byte_aligned_buffers():
     doc = {
         "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "material": 0}]}],
         "materials": [{}],
+        "textures": [{}],
+        "images": [{"uri": "gone.png"}],
+        "samplers": [{}],
         "bufferViews": [
             {"buffer": 0, "byteOffset": 1, "byteLength": 2},
             {"buffer": 1, "byteLength": 5},
@@ -1302,7 +1305,8 @@ def test_the_canonical_glb_is_a_well_formed_glb_with_8_byte_aligned_buffers():
     assert blob == b"abc" + b"\0" * 5 + b"defgh" + b"\0" * 3 + b"ijklmnopq" + b"\0" * 3
     assert out["buffers"] == [{"byteLength": 25}]
     assert [(v["buffer"], v["byteOffset"]) for v in out["bufferViews"]] == [(0, 1), (0, 8), (0, 18)]
-    assert "materials" not in out and out["meshes"][0]["primitives"] == [{"attributes": {"POSITION": 0}}]
+    assert not {"materials", "textures", "images", "samplers"} & set(out)
+    assert out["meshes"][0]["primitives"] == [{"attributes": {"POSITION": 0}}]
 
 
 def test_a_canonical_glb_of_a_document_without_views_or_meshes_has_no_binary_chunk():
@@ -1696,3 +1700,16 @@ def test_a_gltf_mesh_without_primitives_counts_nothing():
     budget, calls = _recorder()
     _check_counts({"meshes": [{}], "nodes": [{"mesh": 0}, {"mesh": 0}]}, budget)
     assert calls == [("vertices", 0, _SCENE), ("faces", 0, _SCENE)]
+
+
+def test_gltf_instances_wait_for_every_parent_and_count_a_root_listed_twice():
+    from app.core.formats.gltf import _instances
+
+    # node 2 has two parents; its child 3 is counted only once both have been added
+    assert _instances({"nodes": [{"children": [2]}, {"children": [2]}, {"children": [3]}, {}]}) == [
+        1,
+        1,
+        2,
+        2,
+    ]
+    assert _instances({"nodes": [{}], "scenes": [{"nodes": [0, 0]}]}) == [2]
