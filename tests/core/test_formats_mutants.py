@@ -1713,3 +1713,18 @@ def test_gltf_instances_wait_for_every_parent_and_count_a_root_listed_twice():
         2,
     ]
     assert _instances({"nodes": [{}], "scenes": [{"nodes": [0, 0]}]}) == [2]
+
+
+def test_the_canonical_glb_keeps_each_meshs_other_keys_and_a_mesh_without_primitives():
+    import json
+    import struct
+
+    from app.core.formats.gltf import _canonical_glb
+
+    doc = {"meshes": [{"name": "a", "weights": [0.5], "primitives": [{"mode": 4}]}, {"name": "b"}]}
+    glb = _canonical_glb(doc, [])
+    json_length = struct.unpack_from("<I", glb, 12)[0]
+    assert json.loads(glb[20 : 20 + json_length])["meshes"] == [
+        {"name": "a", "weights": [0.5], "primitives": [{"mode": 4}]},
+        {"name": "b", "primitives": []},
+    ]
