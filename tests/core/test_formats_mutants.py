@@ -1728,3 +1728,15 @@ def test_the_canonical_glb_keeps_each_meshs_other_keys_and_a_mesh_without_primit
         {"name": "a", "weights": [0.5], "primitives": [{"mode": 4}]},
         {"name": "b", "primitives": []},
     ]
+
+
+def test_a_gltf_accessor_after_one_without_a_view_is_still_measured():
+    from app.core.formats.gltf import _check_views
+
+    doc = _accessor_doc({"componentType": 5126, "type": "VEC3", "count": 2}, 23)
+    doc["accessors"].insert(0, {"componentType": 5126, "type": "VEC3", "count": 5})  # no bufferView
+    doc["accessors"].insert(1, {"bufferView": 0, "componentType": 5126, "type": "VEC3", "count": 0})
+    assert _refusal(_check_views, doc, [b"\0" * 64]) == (
+        "a glTF accessor declares 2 elements (24 bytes), more than its buffer view holds (23 bytes):"
+        " the file is corrupt"
+    )
