@@ -1740,3 +1740,9 @@ def test_a_gltf_accessor_after_one_without_a_view_is_still_measured():
         "a glTF accessor declares 2 elements (24 bytes), more than its buffer view holds (23 bytes):"
         " the file is corrupt"
     )
+
+
+def test_an_empty_glb_binary_chunk_right_after_unpadded_json_is_read():
+    from app.core.formats.gltf import _split_glb
+
+    assert _split_glb(_glb_of((_J, b"{}"), (_B, b""))) == ({}, b"")  # its 8-byte header ends the file
