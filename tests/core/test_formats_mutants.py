@@ -1746,3 +1746,13 @@ def test_an_empty_glb_binary_chunk_right_after_unpadded_json_is_read():
     from app.core.formats.gltf import _split_glb
 
     assert _split_glb(_glb_of((_J, b"{}"), (_B, b""))) == ({}, b"")  # its 8-byte header ends the file
+
+
+def test_a_gltf_without_nodes_places_no_mesh():
+    from app.core.formats.gltf import _check_counts
+
+    budget, calls = _recorder()
+    _check_counts(
+        {"accessors": [{"count": 3}], "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}]}, budget
+    )
+    assert calls == [("vertices", 0, _SCENE), ("faces", 0, _SCENE)]
