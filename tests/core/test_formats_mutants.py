@@ -1756,3 +1756,17 @@ def test_a_gltf_without_nodes_places_no_mesh():
         {"accessors": [{"count": 3}], "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}]}, budget
     )
     assert calls == [("vertices", 0, _SCENE), ("faces", 0, _SCENE)]
+
+
+def test_a_gltf_of_points_only_is_refused_naming_gltf():
+    import base64
+    import json
+
+    from app.core.formats.gltf import read_gltf
+    from app.core.meshdata import Budget
+
+    doc = json.loads(_tetra_gltf("data:;base64," + base64.b64encode(_tetra_bin()).decode()))
+    doc["meshes"][0]["primitives"] = [{"attributes": {"POSITION": 0}, "mode": 0}]  # points
+    assert _refusal(read_gltf, json.dumps(doc).encode(), Budget()) == (
+        "the glTF file holds no triangle mesh (only points, lines or nothing)"
+    )
