@@ -1770,3 +1770,15 @@ def test_a_gltf_of_points_only_is_refused_naming_gltf():
     assert _refusal(read_gltf, json.dumps(doc).encode(), Budget()) == (
         "the glTF file holds no triangle mesh (only points, lines or nothing)"
     )
+
+
+def test_glb_header_fields_are_unsigned_in_messages():
+    from app.core.formats.gltf import read_glb
+    from app.core.meshdata import Budget, UnsupportedFormatError
+
+    with pytest.raises(UnsupportedFormatError) as info:
+        read_glb(_glb_of((_J, b"{}"), version=2**31), Budget())
+    assert str(info.value) == "unsupported mesh format: glTF 2147483648.0 is not supported: export glTF 2.0"
+    assert _refusal(read_glb, _glb_of((_J, b"{}"), extra=2**31), Budget()) == (
+        f"the GLB header declares {2**31 + 22} bytes, but the file holds 22: it is corrupt"
+    )
