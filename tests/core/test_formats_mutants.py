@@ -1782,3 +1782,13 @@ def test_glb_header_fields_are_unsigned_in_messages():
     assert _refusal(read_glb, _glb_of((_J, b"{}"), extra=2**31), Budget()) == (
         f"the GLB header declares {2**31 + 22} bytes, but the file holds 22: it is corrupt"
     )
+
+
+def test_a_glb_chunk_size_of_2_gib_runs_past_the_end():
+    import struct
+
+    from app.core.formats.gltf import read_glb
+    from app.core.meshdata import Budget
+
+    data = b"glTF" + struct.pack("<II", 2, 24) + struct.pack("<II", 2**31, _J) + b"{}  "
+    assert _refusal(read_glb, data, Budget()) == "a GLB chunk runs past the end of the file: it is truncated"
