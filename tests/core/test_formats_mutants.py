@@ -1792,3 +1792,20 @@ def test_a_glb_chunk_size_of_2_gib_runs_past_the_end():
 
     data = b"glTF" + struct.pack("<II", 2, 24) + struct.pack("<II", 2**31, _J) + b"{}  "
     assert _refusal(read_glb, data, Budget()) == "a GLB chunk runs past the end of the file: it is truncated"
+
+
+@pytest.mark.parametrize("text", [b'{"a": 1} ', b'{"a": 1}  ', b'{"a": 1}   '])
+def test_glb_padding_after_a_json_chunk_of_any_length_is_skipped(text):
+    import struct
+
+    from app.core.formats.gltf import _split_glb
+
+    body = (
+        struct.pack("<II", len(text), _J)
+        + text
+        + b" " * (-len(text) % 4)
+        + struct.pack("<II", 3, _B)
+        + b"xyz"
+    )
+    data = b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body
+    assert _split_glb(data) == ({"a": 1}, b"xyz")
