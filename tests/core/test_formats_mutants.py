@@ -1809,3 +1809,21 @@ def test_glb_padding_after_a_json_chunk_of_any_length_is_skipped(text):
     )
     data = b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body
     assert _split_glb(data) == ({"a": 1}, b"xyz")
+
+
+@pytest.mark.parametrize(
+    ("members", "message"),
+    [
+        (
+            {"__MACOSX/a.gltf": b"{}", "b.txt": b""},
+            "the .zip holds no .gltf or .glb file (a .zip upload is a glTF with its files)",
+        ),
+        ({"a.gltf": _tetra_gltf("bin/"), "bin/": b""}, "the glTF refers to 'bin/', which is not in the .zip"),
+        ({"a.gltf": b'{"meshes": []}'}, "the glTF file holds no triangle mesh (it has no meshes)"),
+    ],
+)
+def test_zip_mac_folders_and_folder_entries_are_not_files(members, message):
+    from app.core.formats.gltf import read_zip
+    from app.core.meshdata import Budget
+
+    assert _refusal(read_zip, _zip(members), Budget()) == message
