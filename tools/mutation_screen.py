@@ -21,6 +21,7 @@ tools/ again so new test files are seen.
 from __future__ import annotations
 
 import argparse
+import fcntl
 import fnmatch
 import io
 import json
@@ -46,10 +47,16 @@ def metas() -> dict[str, Path]:
 
 
 def record(meta: Path, name: str, code: int, seconds: float) -> None:
-    data = json.loads(meta.read_text())
-    data["exit_code_by_key"][name] = code
-    data.setdefault("durations_by_key", {})[name] = seconds
-    meta.write_text(json.dumps(data, indent=4))
+    # two screens of one module read-modify-write the same .meta: a lock keeps each update whole
+    # (unlocked, concurrent writes once left a corrupt gltf.py.meta), a rename keeps the file whole
+    with open(meta.with_name(meta.name + ".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        data = json.loads(meta.read_text())
+        data["exit_code_by_key"][name] = code
+        data.setdefault("durations_by_key", {})[name] = seconds
+        tmp = meta.with_name(meta.name + ".tmp")
+        tmp.write_text(json.dumps(data, indent=4))
+        os.replace(tmp, meta)
 
 
 def run_one(name: str, tests: list[str], limit_s: float) -> int | None:

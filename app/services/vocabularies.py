@@ -46,11 +46,11 @@ def _warn_if_encoded_otherwise(vocab: Vocabulary, params: EncodeParams, version:
     if vocab.fusion is None or not isinstance(fitted, dict):
         return
     now = params.encoding()
-    differ = {k: (fitted[k], v) for k, v in now.items() if k in fitted and fitted[k] != v}
-    if differ:
+    was = {k: fitted[k] for k in now if k in fitted and fitted[k] != now[k]}
+    if was:
         log.warning("vocabulary version %d's fusion scale was fit with %s; the encode settings say %s: "
                     "rebuild the vocabulary (POST /admin/vocabulary/rebuild) to refit it",
-                    version, {k: a for k, (a, _) in differ.items()}, {k: b for k, (_, b) in differ.items()})
+                    version, was, {k: now[k] for k in was})
 
 
 def inside_data_dir(ctx: ServiceContext, relative: str) -> Path:

@@ -11,6 +11,7 @@ import pytest
 
 from app.core.formats import containers
 from app.core.meshdata import InvalidMeshError
+from tests.core.test_formats import tetra_doc
 
 
 def _zip(members: dict[str, bytes], compression: int = zipfile.ZIP_STORED) -> bytes:
@@ -1605,32 +1606,16 @@ def test_a_gltf_buffer_without_a_byte_length_may_be_empty():
 
 
 def _tetra_gltf(uri: str) -> bytes:
+    """test_formats' glTF tetrahedron, its buffer in the file at `uri`."""
     import json
 
-    return json.dumps(
-        {
-            "asset": {"version": "2.0"},
-            "buffers": [{"byteLength": 72, "uri": uri}],
-            "bufferViews": [
-                {"buffer": 0, "byteOffset": 0, "byteLength": 48},
-                {"buffer": 0, "byteOffset": 48, "byteLength": 24},
-            ],
-            "accessors": [
-                {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3"},
-                {"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"},
-            ],
-            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
-            "nodes": [{"mesh": 0}],
-            "scenes": [{"nodes": [0]}],
-        }
-    ).encode()
+    doc, blob = tetra_doc([{"mesh": 0}])
+    doc["buffers"] = [{"byteLength": len(blob), "uri": uri}]
+    return json.dumps(doc).encode()
 
 
 def _tetra_bin() -> bytes:
-    import numpy as np
-
-    blob = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], "<f4").tobytes()
-    return blob + np.array([0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3], "<u2").tobytes()
+    return tetra_doc([{"mesh": 0}])[1]
 
 
 def test_a_zip_with_one_gltf_beside_mac_leftovers_and_folders_reads_its_files_relative_to_it():
