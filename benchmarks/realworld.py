@@ -4,6 +4,7 @@
     python -m benchmarks.realworld --files 'oded__*'      # a glob on the file (or folder) name
     python -m benchmarks.realworld --jobs 2 --timeout 120
     python -m benchmarks.realworld --baseline            # with the agg=3-only simplify of before
+    python -m benchmarks.realworld --target-vertices 2000 --name realworld-2k   # price another setting
 
 Each file runs in a fresh child (`OMP/OPENBLAS/MKL_NUM_THREADS=1` in its environment, so set before
 numpy loads): `mesh_policy.load_upload` (load + validate + clean + surface check, the service's vertex
@@ -111,8 +112,11 @@ def decimation_quality(before, after, samples: int = 20000) -> dict:
             "mean_dist_pct": 100 * float(d.mean()) / diag}
 
 
-def describe_upload(entry: str, baseline: bool = False) -> dict:
-    """In this (child) process: the upload path on one corpus entry; never raises."""
+def describe_upload(entry: str, baseline: bool = False, overrides: dict | None = None) -> dict:
+    """In this (child) process: the upload path on one corpus entry; never raises.
+
+    overrides: DescribeParams fields to change (e.g. {"target_vertices": 2000}), to price a setting.
+    """
     from app.config import Settings
     from app.core.mesh import InvalidMeshError
     from app.core.pipeline import DescribeParams, describe
@@ -121,7 +125,7 @@ def describe_upload(entry: str, baseline: bool = False) -> dict:
     if baseline:
         use_legacy_simplify()
 
-    params = DescribeParams()
+    params = DescribeParams(**(overrides or {}))
     max_vertices = Settings.model_fields["max_vertices"].default
     data, name = upload_of(Path(entry))
     out: dict = {"target": params.target_vertices}
@@ -147,11 +151,12 @@ def describe_upload(entry: str, baseline: bool = False) -> dict:
     return out
 
 
-def run_child(entry: Path, timeout_s: float, baseline: bool = False) -> dict:
+def run_child(entry: Path, timeout_s: float, baseline: bool = False, overrides: dict | None = None) -> dict:
     """describe_upload(entry) in a fresh one-thread interpreter; classifies deaths and timeouts."""
     t0 = time.perf_counter()
     row: dict = {"file": entry.name}
     child = ["--child", str(entry)] + (["--baseline"] if baseline else [])
+    child += [f"--{key.replace('_', '-')}={value}" for key, value in (overrides or {}).items()]
     try:
         proc = subprocess.run(
             [sys.executable, "-m", "benchmarks.realworld", *child],
@@ -250,15 +255,16 @@ def report(rows: list[dict], summary: dict) -> str:
 
 def run(
     entries: list[Path], jobs: int = 1, timeout_s: float = 60.0, name: str = "realworld",
-    baseline: bool = False,
+    baseline: bool = False, overrides: dict | None = None,
 ) -> dict:
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-        rows = list(pool.map(lambda e: run_child(e, timeout_s, baseline), entries))
+        rows = list(pool.map(lambda e: run_child(e, timeout_s, baseline, overrides), entries))
     summary = summarise(rows)
     print(report(rows, summary))
     simplify = "legacy (agg=3 only)" if baseline else "ours"
     path = write_json(name, {"corpus": str(CORPUS), "jobs": jobs, "timeout_s": timeout_s,
-                             "simplify": simplify, "summary": summary, "rows": rows})
+                             "simplify": simplify, "overrides": overrides or {},
+                             "summary": summary, "rows": rows})
     print(f"wrote {path}")
     return {"rows": rows, "summary": summary}
 
@@ -270,10 +276,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--timeout", type=float, default=60.0, help="seconds per file")
     ap.add_argument("--baseline", action="store_true", help="describe with the agg=3-only simplify of before")
     ap.add_argument("--name", default=None, help="results/<name>.json (realworld, realworld-baseline)")
+    ap.add_argument("--target-vertices", type=int, default=None,
+                    help="canonical resolution (default: the shipped one)")
+    ap.add_argument("--k", type=int, default=None, help="eigenpairs (default: the shipped k)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    overrides = {key: value for key in ("target_vertices", "k") if (value := getattr(args, key)) is not None}
     if args.child:
-        print(json.dumps(describe_upload(args.child, args.baseline)))
+        print(json.dumps(describe_upload(args.child, args.baseline, overrides)))
         return 0
     if not CORPUS.is_dir():
         print(f"no corpus at {CORPUS} (set SHAPEBAG_REALWORLD)")
@@ -284,7 +294,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no corpus entry matches {patterns}")
         return 1
     name = args.name or ("realworld-baseline" if args.baseline else "realworld")
-    result = run(entries, args.jobs, args.timeout, name, args.baseline)
+    result = run(entries, args.jobs, args.timeout, name, args.baseline, overrides)
     bad = sum(result["summary"]["counts"][o] for o in ("error", "crash", "timeout"))
     return 0 if bad == 0 else 1
 

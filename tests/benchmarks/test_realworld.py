@@ -65,6 +65,20 @@ def test_realworld_benchmark_describes_refuses_and_zips_folders(tmp_path, capsys
 
 @pytest.mark.slow
 @needs_corpus
+def test_realworld_benchmark_prices_another_resolution(tmp_path):
+    """--target-vertices reaches the child: the file is solved at that resolution, and it is recorded."""
+    code = realworld.main(["--files", "oded__wingnut.obj", "--target-vertices", "500", "--k", "120",
+                           "--name", "rw-500"])
+    doc = _json(tmp_path, "rw-500")
+    assert doc["overrides"] == {"target_vertices": 500, "k": 120}
+    (row,) = doc["rows"]
+    assert row["outcome"] == "described" and row["target"] == 500
+    assert 500 / 1.5 <= row["vertices_solved"] <= 500 * 1.5
+    assert code == 0
+
+
+@pytest.mark.slow
+@needs_corpus
 def test_large_inputs_benchmark_runs_ours_and_the_baseline(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(large_inputs, "SIZES", {"tiny": ("oded__wingnut.obj", 1)})  # 3k -> 12k vertices
     assert large_inputs.main(["--sizes", "tiny", "--baseline", "--name", "large-smoke"]) == 0
