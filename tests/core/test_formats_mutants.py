@@ -1812,3 +1812,79 @@ def test_zip_mac_folders_and_folder_entries_are_not_files(members, message):
     from app.core.meshdata import Budget
 
     assert _refusal(read_zip, _zip(members), Budget()) == message
+
+
+# --- glTF in a .zip (sixth pass): the archive named as a zip, folders never read as files --------------
+
+
+def _damaged(members: dict[str, bytes], name: str) -> bytes:
+    """A deflated archive of `members` whose member `name` does not unpack (the first bytes of its
+    stream overwritten); the others are intact."""
+    import struct
+
+    data = bytearray(_zip(members, zipfile.ZIP_DEFLATED))
+    at = zipfile.ZipFile(io.BytesIO(bytes(data))).getinfo(name).header_offset
+    name_length, extra_length = struct.unpack_from("<HH", data, at + 26)
+    start = at + 30 + name_length + extra_length
+    data[start : start + 8] = b"\xff" * 8
+    return bytes(data)
+
+
+def test_a_zip_upload_that_is_no_zip_is_refused_as_a_zip():
+    from app.core.formats.gltf import read_zip
+    from app.core.meshdata import Budget
+
+    message = _refusal(read_zip, b"PK\x03\x04 but not an archive", Budget())
+    assert message == "could not read the file as zip: it is not a valid zip archive"
+
+
+@pytest.mark.parametrize("damaged", ["m/a.gltf", "m/t.bin"])
+def test_a_zip_member_that_does_not_unpack_is_named_with_the_zip_archive(damaged):
+    """The model and the file it refers to are unpacked as members of the zip archive, and a damaged
+    one is named in words (not zlib's)."""
+    from app.core.formats.gltf import read_zip
+    from app.core.meshdata import Budget
+
+    members = {"m/a.gltf": _tetra_gltf("t.bin"), "m/t.bin": _tetra_bin()}
+    assert len(read_zip(_zip(members, zipfile.ZIP_DEFLATED), Budget())[1]) == 4  # intact: read
+    message = _refusal(read_zip, _damaged(members, damaged), Budget())
+    assert message == f"could not unpack '{damaged}' from the zip archive: it is corrupt"
+
+
+def test_a_folder_entry_is_never_read_as_a_file_the_gltf_names():
+    """A uri resolving to "/" names the archive's root folder entry "/" exactly (normpath keeps a lone
+    slash): it is a folder, so the file is missing, not read as empty bytes."""
+    from app.core.formats.gltf import read_zip
+    from app.core.meshdata import Budget
+
+    data = _zip({"a.gltf": _tetra_gltf("/"), "/": b""})
+    assert "/" in zipfile.ZipFile(io.BytesIO(data)).namelist()
+    assert _refusal(read_zip, data, Budget()) == "the glTF refers to '/', which is not in the .zip"
+
+
+def _glb(doc: dict, chunk: bytes | None = None) -> bytes:
+    import json
+    import struct
+
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    body = struct.pack("<II", len(text), _J) + text
+    if chunk is not None:
+        body += struct.pack("<II", len(chunk), _B) + chunk
+    return b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body
+
+
+def test_a_glb_in_a_zip_reads_the_files_it_refers_to_and_is_named_glb():
+    """A GLB's buffer may live in a file beside it: read from the .zip, relative to the GLB. Its
+    refusals name it GLB."""
+    import json
+
+    from app.core.formats.gltf import read_zip
+    from app.core.meshdata import Budget
+
+    doc = json.loads(_tetra_gltf("t.bin"))
+    vertices, faces = read_zip(_zip({"x/model.glb": _glb(doc), "x/t.bin": _tetra_bin()}), Budget())
+    assert len(vertices) == 4 and len(faces) == 4
+    del doc["buffers"][0]["uri"]  # and no binary chunk: nowhere to read it from
+    message = _refusal(read_zip, _zip({"model.glb": _glb(doc)}), Budget())
+    assert message == "the GLB buffer 0 has no data (no URI and no binary chunk)"
