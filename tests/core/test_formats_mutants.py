@@ -1888,3 +1888,54 @@ def test_a_glb_in_a_zip_reads_the_files_it_refers_to_and_is_named_glb():
     del doc["buffers"][0]["uri"]  # and no binary chunk: nowhere to read it from
     message = _refusal(read_zip, _zip({"model.glb": _glb(doc)}), Budget())
     assert message == "the GLB buffer 0 has no data (no URI and no binary chunk)"
+
+
+# --- STL's windows (sixth pass): the ASCII sniff reads the first KiB, the 'endsolid' check the last 4 KiB --
+
+
+@pytest.mark.parametrize(("blanks", "ascii"), [(1019, True), (1020, False)])
+def test_an_stl_is_taken_for_ascii_only_when_solid_begins_within_its_first_kib(blanks, ascii):
+    """'solid' ending at byte 1024 is seen; one byte later it is past the sniffed window, and the file is
+    read as binary: its 'header' (blanks) declares 0x20202020 triangles, so it is refused as such."""
+    from app.core.formats.stl import read_stl
+    from app.core.meshdata import Budget
+
+    data = b" " * blanks + _ascii_stl(_FACET)
+    if ascii:
+        assert read_stl(data, Budget())[1].tolist() == [[0, 1, 2]]
+    else:
+        assert _refusal(read_stl, data, Budget()).startswith("the STL header declares 538976288 triangles")
+
+
+@pytest.mark.parametrize(("nul_at", "ascii"), [(1023, False), (1024, True)])
+def test_a_nul_makes_an_stl_binary_only_within_its_first_kib(nul_at, ascii):
+    """A NUL byte in the sniffed window marks a binary file that happens to start with 'solid' (some
+    exporters write it in the header); past the window it is text the vertex lines never read."""
+    from app.core.formats.stl import read_stl
+    from app.core.meshdata import Budget
+
+    name = b"solid " + b"n" * (nul_at - 6) + b"\x00\n"  # the solid's name line, its NUL at nul_at
+    data = name + _FACET + b"endsolid t\n"
+    assert data.index(b"\x00") == nul_at
+    if ascii:
+        assert read_stl(data, Budget())[1].tolist() == [[0, 1, 2]]
+    else:
+        assert _refusal(read_stl, data, Budget()).startswith("the STL header declares")
+
+
+@pytest.mark.parametrize(("tail", "whole"), [(4096, True), (4097, False)])
+def test_an_ascii_stl_is_cut_when_no_endsolid_begins_in_its_last_4_kib(tail, whole):
+    """A second solid whose facets are not followed by 'endsolid' was cut; the check looks for
+    'endsolid' in the last 4096 bytes, so the first solid's 'endsolid' counts only if it starts there."""
+    from app.core.formats.stl import read_stl
+    from app.core.meshdata import Budget
+
+    first = b"solid a\n" + _FACET + b"endsolid a\n"
+    name_length = tail - len(b"endsolid a\n") - len(b"solid \n") - len(_FACET)
+    data = first + b"solid " + b"b" * name_length + b"\n" + _FACET  # cut: no endsolid b
+    assert len(data) - data.index(b"endsolid a") == tail
+    if whole:
+        assert len(read_stl(data, Budget())[1]) == 2  # a cut between facets still parses (stl.py)
+    else:
+        message = _refusal(read_stl, data, Budget())
+        assert message == "the ASCII STL does not end with 'endsolid': it is truncated"
