@@ -27,12 +27,13 @@ def nine_clusters() -> tuple[np.ndarray, float]:
 
 
 def test_the_vocabulary_is_the_best_of_several_k_means_runs():
-    """With one k-means++ run per fit, about 8 of these 20 seeds end in a local optimum (measured with
-    scikit-learn 1.x); with the best of 4 runs each seed misses only if all 4 do. Allowing 2 misses keeps
-    the test independent of scikit-learn's exact random streams."""
+    """With one k-means++ run per fit, 9 of these 20 seeds end in a local optimum (scikit-learn 1.9); the
+    best of 4 runs misses only if all 4 do (1 seed of 20; the best of 5: none). Allowing 4 misses keeps
+    the test independent of scikit-learn's exact random streams: were each run to miss with probability
+    0.45, the best of 4 would miss 5 or more of 20 about once in 900, one run 4 or fewer about once in 50."""
     features, optimum = nine_clusters()
     inertias = [Vocabulary.fit_features(features, size=9, run="run5", seed=seed).metadata["inertia"]
                 for seed in range(20)]
     assert min(inertias) >= optimum * (1 - 1e-9)  # nothing beats the true partition
     found = sum(inertia <= optimum * (1 + 1e-9) for inertia in inertias)
-    assert found >= 18, inertias
+    assert found >= 16, inertias
