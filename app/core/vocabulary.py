@@ -90,11 +90,10 @@ class Vocabulary:
         encoded with `params`: the scales belong to the vocabulary, so stored vectors stay comparable."""
         if len(descriptions) < 2:
             raise ValueError("fusion scales need at least 2 training shapes")
-        # c: as many eigenvalues as every training shape has (SHAPE_DNA_COUNT unless k is tiny)
+        # c: as many eigenvalues as every training shape has (SHAPE_DNA_COUNT unless k is tiny); at
+        # least 1, since first_nonzero raises SpectrumError for a shape with no non-zero eigenvalue
         available = min(len(d.eigenvalues) - first_nonzero(np.sort(d.eigenvalues)) for d in descriptions)
         count = min(SHAPE_DNA_COUNT, available)
-        if count < 1:
-            raise ValueError("a training shape has no non-zero eigenvalue: no Shape-DNA to fuse")
         bofs = np.stack([self.bof(d, params) for d in descriptions])  # (N, v)
         dnas = np.stack([dna_vector(d, count) for d in descriptions])  # (N, c)
         scales = fit_scales(bofs, dnas, weight)

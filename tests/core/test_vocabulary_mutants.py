@@ -13,6 +13,7 @@ import pytest
 from app.core.descriptor import select
 from app.core.fusion import pairwise_l1
 from app.core.pipeline import ShapeDescription
+from app.core.spectrum import SpectrumError
 from app.core.vocabulary import VOCABULARY_FORMAT, EncodeParams, Vocabulary, params_dict, training_features
 
 WORDS = np.array([[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0]], np.float32)
@@ -128,6 +129,9 @@ def test_with_fusion_needs_two_shapes_and_keeps_the_metadata():
     fused = plain.with_fusion(two)
     assert fused.fusion is not None and fused.fusion.count == 1  # c = 1 is enough
     assert fused.metadata["note"] == "kept" and "fusion" not in plain.metadata
+    flat = [*one, description(clusters(1, 4), eigenvalues=[0.0, 0.0])]  # no non-zero eigenvalue
+    with pytest.raises(SpectrumError, match="no non-zero eigenvalue"):
+        plain.with_fusion(flat)
 
 
 def test_with_fusion_scales_the_bof_encoded_with_the_params():
