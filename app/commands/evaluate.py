@@ -65,7 +65,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--subdivision", choices=SUBDIVISIONS, default=EvaluationOptions.subdivision,
                    help="how coarse meshes are refined to the canonical resolution (default %(default)s)")
     p.add_argument("--vocabulary", type=Path, metavar="DIR",
-                   help="also encode with this frozen vocabulary (centers.npy + vocabulary.json)")
+                   help="also encode with this frozen vocabulary (centers.npy + vocabulary.json); a fused "
+                        "row at the weight its scales were fit for gets the line the service would serve")
     p.add_argument("--fit-on", choices=("all", "half"), default="all",
                    help="half: also fit a vocabulary on half of the classes and report the mAP shift")
     p.add_argument("--noise", type=float, default=0.0, metavar="NSR",

@@ -111,7 +111,7 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
         if name in RUNS:
             bof = [Row(name, "bof", base, name)]
         elif name == "paper":
-            paper = replace(base, target_vertices=0, smoothing=0, time_range="spectrum",
+            paper = replace(base, k=300, target_vertices=0, smoothing=0, time_range="spectrum",
                             laplacian="cotangent", remesh=False)
             bof = [Row(name, "bof", paper, "run5", area_weighted=False)]  # eq. 8, a sum over vertices
         else:
@@ -236,7 +236,11 @@ def _bof_lines(
     by_name = {line.name: line for line in lines}
     for line in lines:  # Δ mAP against the mean clean line, not against one seed's
         line.reference = by_name[line.reference.name] if line.reference is not None else None
-    if frozen is not None and row.fusion is None:  # one vocabulary, no seed
+    # one vocabulary, no seed; on a fused row only with the vocabulary's own scales at that weight,
+    # which is what the service serves with it
+    served = row.fusion is None or (frozen is not None and frozen.fusion is not None
+                                    and frozen.fusion.weight == row.fusion)
+    if frozen is not None and served:
         name = f"{row.name} [frozen {Path(options.vocabulary or '').name}]"
         lines.insert(1, _score_bof(name, row, frozen, db, db, labels, params, time.perf_counter(), lines[0]))
     return lines

@@ -12,6 +12,7 @@ import pytest
 
 from app.cli import CommandError
 from app.core.metrics import METRICS
+from app.core.pipeline import ShapeDescription
 from app.core.vocabulary import Vocabulary
 from app.services import evaluation_cache
 from app.services.evaluation import EvaluationError, EvaluationOptions, evaluate
@@ -119,6 +120,39 @@ def test_variant_lines_noise_frozen_and_half_fit(folder: Path, tmp_path: Path) -
     assert len(noisy_files) == 12
     doc = to_json(result)
     assert json.loads(json.dumps(doc))["rows"][3]["reference"] == "run5"
+
+
+def test_a_fused_row_is_scored_with_the_frozen_words_and_their_scales(folder: Path, tmp_path: Path) -> None:
+    """The fused frozen line is what the service serves: the vocabulary's words and its stored scales."""
+    cache = tmp_path / "cache"
+    evaluate(folder, _options(cache, rows=("run5",), vocabulary_size=4))  # describes into the cache
+    shapes = [ShapeDescription.load(p) for p in sorted(cache.rglob("*.npz")) if "noise" not in p.name]
+    words = Vocabulary.fit(shapes, size=4, run="run5", seed=3)  # words of these shapes: few BoF ties
+
+    def with_scales(name: str, bof: float, dna: float) -> Path:
+        meta = {**words.metadata, "fusion": {"bof": bof, "dna": dna, "weight": 1.0, "count": 10}}
+        return Vocabulary(words.centers, run="run5", sigma=words.sigma, metadata=meta).save(tmp_path / name)
+
+    # a DNA scale so large that the DNA part only breaks the BoF's ties
+    result = evaluate(folder, _options(cache, rows=("run5",), vocabulary_size=4, fusion=(0.5, 1.0),
+                                       vocabulary=with_scales("faint", 1.0, 1e12)))
+    names = [r.name for r in result.rows]
+    # no frozen line at w = 0.5: the vocabulary's scales were fixed for w = 1
+    assert names == ["run5", "run5 [frozen faint]", "run5 + 0.5 DNA", "run5 + 1 DNA",
+                     "run5 + 1 DNA [frozen faint]"]
+    faint = result.rows[4]
+    assert faint.reference is result.rows[3]
+    # the stored scales are used, not refit on the data: the same words with a BoF scale so large that
+    # only the DNA ranks give another figure (refit scales would give the same one twice)
+    dna_only = evaluate(folder, _options(cache, rows=("run5",), vocabulary_size=4, fusion=(1.0,),
+                                         vocabulary=with_scales("dna", 1e12, 1.0)))
+    assert dna_only.rows[-1].name == "run5 + 1 DNA [frozen dna]"
+    assert dna_only.rows[-1].scores["mAP"] != pytest.approx(faint.scores["mAP"], abs=1e-6)
+    assert dna_only.rows[2].scores == result.rows[3].scores  # the self-fit fused line does not change
+    # the same words without scales: no fused frozen line
+    bare = evaluate(folder, _options(cache, rows=("run5",), vocabulary_size=4, fusion=(1.0,),
+                                     vocabulary=words.save(tmp_path / "bare")))
+    assert [r.name for r in bare.rows] == ["run5", "run5 [frozen bare]", "run5 + 1 DNA"]
 
 
 def test_frozen_vocabulary_of_another_run_is_refused(folder: Path, tmp_path: Path) -> None:
@@ -337,10 +371,11 @@ def test_command_passes_the_new_flags(folder: Path, tmp_path: Path, monkeypatch:
 
 
 def test_paper_preset_is_the_papers_method(folder: Path, tmp_path: Path) -> None:
-    # the raw resolution, no smoothing, the computed t_min and the cotangent Laplacian, whatever the defaults
+    # the paper's k = 300 at the raw resolution, no smoothing, the computed t_min and the cotangent
+    # Laplacian, whatever the defaults
     result = evaluate(folder, _options(tmp_path / "cache", rows=("paper",)))
     describe = result.rows[0].details["describe"]
-    wanted = ("laplacian=cotangent", "remesh=False", "smoothing=0", "target_vertices=0",
+    wanted = ("k=300", "laplacian=cotangent", "remesh=False", "smoothing=0", "target_vertices=0",
               "time_range=spectrum")
     for part in wanted:
         assert part in describe.split(";"), (part, describe)
