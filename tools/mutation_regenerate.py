@@ -14,19 +14,19 @@ with tools/mutation_screen.py.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from collections import Counter
 from pathlib import Path
 
+from mutation_report import equivalent_names, module_counts  # tools/ is sys.path[0] when run as a script
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def summary(meta: Path) -> Counter[str]:
-    codes = json.loads(meta.read_text())["exit_code_by_key"] if meta.exists() else {}
-    return Counter("not run" if c is None else "killed" if c == 1 else "survived" if c == 0 else f"code {c}"
-                   for c in codes.values())
+    """The module's counts as tools/mutation_report.py reports them (timeouts killed, equivalents apart)."""
+    return module_counts(meta, equivalent_names(Path("docs/testing.md"))) if meta.exists() else Counter()
 
 
 def main(argv: list[str] | None = None) -> int:

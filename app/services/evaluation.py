@@ -236,14 +236,17 @@ def _bof_lines(
     by_name = {line.name: line for line in lines}
     for line in lines:  # Δ mAP against the mean clean line, not against one seed's
         line.reference = by_name[line.reference.name] if line.reference is not None else None
-    # one vocabulary, no seed; on a fused row only with the vocabulary's own scales at that weight,
-    # which is what the service serves with it
-    served = row.fusion is None or (frozen is not None and frozen.fusion is not None
-                                    and frozen.fusion.weight == row.fusion)
-    if frozen is not None and served:
+    # one vocabulary, no seed; a fused row only at the weight of the vocabulary's own scales (what the
+    # service serves with it)
+    if frozen is not None and (row.fusion is None or _fused_at(frozen, row.fusion)):
         name = f"{row.name} [frozen {Path(options.vocabulary or '').name}]"
         lines.insert(1, _score_bof(name, row, frozen, db, db, labels, params, time.perf_counter(), lines[0]))
     return lines
+
+
+def _fused_at(vocab: Vocabulary, weight: float) -> bool:
+    """Whether `vocab` carries fusion scales fit for the Shape-DNA weight `weight`."""
+    return vocab.fusion is not None and vocab.fusion.weight == weight
 
 
 def _bof_lines_one_seed(

@@ -68,26 +68,19 @@ def test_a_piece_of_exactly_one_percent_of_the_largest_area_is_kept():
     assert cleaning.clean(_square_and_triangle(3.9)).n_faces == 4  # debris
 
 
-def test_a_soup_of_small_pieces_says_how_many_faces_each_has():
-    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float64)
-    vertices = np.vstack([quad + [3.0 * k, 0.0, 0.0] for k in range(3)])
-    faces = np.vstack([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * k for k in range(3)]).astype(np.int64)
+@pytest.mark.parametrize(("piece", "faces", "count", "says"), [
+    ([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]], 3, "at most 2 faces each"),
+    ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], 4, "a single face each"),
+])
+def test_a_soup_says_how_many_faces_each_piece_has(piece, faces, count, says):
+    """`count` copies of a piece, 3 apart: no surface joins them."""
+    piece, faces = np.array(piece, np.float64), np.array(faces, np.int64)
+    vertices = np.vstack([piece + [3.0 * k, 0.0, 0.0] for k in range(count)])
+    all_faces = np.vstack([faces + len(piece) * k for k in range(count)])
     with pytest.raises(InvalidMeshError) as info:
-        cleaning.clean(Mesh(vertices, faces))
+        cleaning.clean(Mesh(vertices, all_faces))
     assert str(info.value) == (
-        "the mesh is a triangle soup: its 6 faces form 3 separate pieces (at most 2 faces each),"
-        " with no surface joining them; export it as a connected (welded) surface"
-    )
-
-
-def test_a_soup_of_single_triangles_says_a_single_face_each():
-    tri = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float64)
-    vertices = np.vstack([tri + [3.0 * k, 0.0, 0.0] for k in range(4)])
-    faces = np.arange(12, dtype=np.int64).reshape(4, 3)
-    with pytest.raises(InvalidMeshError) as info:
-        cleaning.clean(Mesh(vertices, faces))
-    assert str(info.value) == (
-        "the mesh is a triangle soup: its 4 faces form 4 separate pieces (a single face each),"
+        f"the mesh is a triangle soup: its {len(all_faces)} faces form {count} separate pieces ({says}),"
         " with no surface joining them; export it as a connected (welded) surface"
     )
 

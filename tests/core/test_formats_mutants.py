@@ -7,10 +7,40 @@ import sys
 import zipfile
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
+import trimesh
 
-from app.core.formats import containers
-from app.core.meshdata import InvalidMeshError
+from app.core.formats import containers, detect_format, scene
+from app.core.formats.common import (
+    BOM,
+    fan_triangulate,
+    first_columns,
+    indices,
+    numbers,
+    text_lines,
+    whole_numbers,
+)
+from app.core.formats.gltf import (
+    MAX_INSTANCES,
+    _buffers,
+    _canonical_glb,
+    _check_counts,
+    _check_extensions,
+    _check_views,
+    _instances,
+    _split_glb,
+    read_glb,
+    read_gltf,
+    read_zip,
+)
+from app.core.formats.obj import read_obj
+from app.core.formats.off import read_off
+from app.core.formats.other import read_3mf, read_dae, read_drc
+from app.core.formats.ply import read_ply
+from app.core.formats.scene import load_with_trimesh, scene_arrays, short
+from app.core.formats.stl import read_stl
+from app.core.meshdata import FACE_FACTOR, RAW_VERTEX_FACTOR, Budget, InvalidMeshError, UnsupportedFormatError
 from tests.core.test_formats import tetra_doc
 
 
@@ -85,8 +115,6 @@ def test_a_damaged_archive_is_called_corrupt_in_words():
 
 
 def test_an_unknown_extension_is_named_up_to_20_characters_with_the_supported_ones():
-    from app.core.formats import detect_format
-
     with pytest.raises(InvalidMeshError) as info:
         detect_format("part.abcdefghijklmnopqrstuvwxyz")
     assert str(info.value) == (
@@ -96,18 +124,12 @@ def test_an_unknown_extension_is_named_up_to_20_characters_with_the_supported_on
 
 
 def test_trimesh_files_are_read_as_they_are_without_welding():
-    from app.core.formats.scene import load_with_trimesh
-    from app.core.meshdata import Budget
-
     data = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 0\nf 1 2 3\nf 4 3 2\n"  # vertex 4 repeats vertex 1
     vertices, faces = load_with_trimesh(data, "obj", "OBJ", Budget())
     assert vertices.shape == (4, 3) and faces.tolist() == [[0, 1, 2], [3, 2, 1]]
 
 
 def test_a_file_trimesh_cannot_read_is_refused_with_the_first_line_of_its_error(monkeypatch):
-    from app.core.formats import scene
-    from app.core.meshdata import Budget
-
     def broken(*args, **kwargs):
         raise ValueError("bad <COLLADA> root\nline 2 of the traceback")
 
@@ -117,10 +139,6 @@ def test_a_file_trimesh_cannot_read_is_refused_with_the_first_line_of_its_error(
 
 
 def test_placed_parts_are_counted_together_against_the_face_budget():
-    import trimesh
-
-    from app.core.formats.scene import scene_arrays
-    from app.core.meshdata import Budget
 
     ball = trimesh.creation.icosphere(1)  # 42 vertices, 80 faces
     box = trimesh.Scene()
@@ -135,8 +153,6 @@ def test_placed_parts_are_counted_together_against_the_face_budget():
 
 
 def _scene_of(*geometry):
-    import trimesh
-
     scene = trimesh.Scene()
     for g in geometry:
         scene.add_geometry(g)
@@ -145,11 +161,6 @@ def _scene_of(*geometry):
 
 @pytest.mark.parametrize("kind", ["empty mesh", "points"])
 def test_a_scene_without_a_face_holds_no_triangle_mesh(kind):
-    import numpy as np
-    import trimesh
-
-    from app.core.formats.scene import scene_arrays
-    from app.core.meshdata import Budget
 
     points = np.random.default_rng(1).random((5, 3))
     if kind == "points":
@@ -161,11 +172,6 @@ def test_a_scene_without_a_face_holds_no_triangle_mesh(kind):
 
 
 def test_a_point_cloud_or_a_path_is_refused_in_words():
-    import numpy as np
-    import trimesh
-
-    from app.core.formats.scene import scene_arrays
-    from app.core.meshdata import Budget
 
     cloud = trimesh.PointCloud(np.random.default_rng(2).random((5, 3)))
     assert (
@@ -177,8 +183,6 @@ def test_a_point_cloud_or_a_path_is_refused_in_words():
 
 
 def test_short_is_the_first_line_of_an_error_at_most_200_characters_or_its_type():
-    from app.core.formats.scene import short
-
     assert short(ValueError("  first line\nsecond")) == "first line"
     assert short(ValueError("x" * 300)) == "x" * 200
     assert short(KeyError()) == "KeyError"
@@ -186,9 +190,6 @@ def test_short_is_the_first_line_of_an_error_at_most_200_characters_or_its_type(
 
 
 def test_3mf_refusals_name_3mf():
-    from app.core.formats.other import read_3mf
-    from app.core.meshdata import Budget
-
     assert _refusal(read_3mf, b"not a zip", Budget()) == (
         "could not read the file as 3MF: it is not a valid zip archive"
     )
@@ -201,9 +202,6 @@ def test_3mf_refusals_name_3mf():
 
 
 def test_a_collada_file_trimesh_cannot_read_names_collada():
-    from app.core.formats.other import read_dae
-    from app.core.meshdata import Budget
-
     assert _refusal(read_dae, b"\x00\x01 not xml", Budget()).startswith(
         "could not read the file as COLLADA: "
     )
@@ -211,8 +209,6 @@ def test_a_collada_file_trimesh_cannot_read_names_collada():
 
 @pytest.fixture
 def fake_draco(monkeypatch):
-    import numpy as np
-
     decoded = {"value": None}
 
     def decode(data):
@@ -229,10 +225,6 @@ def fake_draco(monkeypatch):
 
 
 def test_draco_points_and_faces_come_back_as_float64_and_int64(fake_draco):
-    import numpy as np
-
-    from app.core.formats.other import read_drc
-    from app.core.meshdata import Budget
 
     vertices, faces = read_drc(b"DRACO....", Budget())
     assert vertices.dtype == np.float64 and vertices.shape == (4, 3)
@@ -240,10 +232,6 @@ def test_draco_points_and_faces_come_back_as_float64_and_int64(fake_draco):
 
 
 def test_a_draco_point_cloud_has_no_faces(fake_draco):
-    import numpy as np
-
-    from app.core.formats.other import read_drc
-    from app.core.meshdata import Budget
 
     fake_draco["value"] = SimpleNamespace(points=np.zeros(12, np.float32))  # flat, no faces attribute
     vertices, faces = read_drc(b"DRACO....", Budget())
@@ -251,9 +239,6 @@ def test_a_draco_point_cloud_has_no_faces(fake_draco):
 
 
 def test_a_draco_stream_the_decoder_refuses_is_named_with_its_error(fake_draco):
-    from app.core.formats.other import read_drc
-    from app.core.meshdata import Budget
-
     fake_draco["value"] = RuntimeError("Failed to decode the geometry\ndetails")
     assert _refusal(read_drc, b"DRACO....", Budget()) == (
         "could not read the file as Draco: Failed to decode the geometry"
@@ -261,17 +246,11 @@ def test_a_draco_stream_the_decoder_refuses_is_named_with_its_error(fake_draco):
 
 
 def test_obj_without_vertex_lines_is_refused_in_words():
-    from app.core.formats.obj import read_obj
-    from app.core.meshdata import Budget
-
     message = _refusal(read_obj, b"f 1 2 3\n", Budget())
     assert message == "the mesh has no vertices (the file has no OBJ 'v' lines)"
 
 
 def test_obj_relative_indices_count_back_from_the_vertices_defined_so_far():
-    from app.core.formats.obj import read_obj
-    from app.core.meshdata import Budget
-
     data = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nv 0 0 1\nf -4 -1 -2\nf 1 2 4\n"
     vertices, faces = read_obj(data, Budget())
     assert vertices.shape == (4, 3)
@@ -279,9 +258,6 @@ def test_obj_relative_indices_count_back_from_the_vertices_defined_so_far():
 
 
 def test_obj_counts_are_checked_against_the_budget_in_words():
-    from app.core.formats.obj import read_obj
-    from app.core.meshdata import Budget
-
     seven = b"v 0 0 0\n" * 7 + b"f 1 2 3\n"
     assert _refusal(read_obj, seven, Budget(1)) == (
         "the OBJ file declares 7 vertices: far more than the limit of 1 vertices could hold even after"
@@ -294,10 +270,6 @@ def test_obj_counts_are_checked_against_the_budget_in_words():
 
 
 def test_draco_refusals_in_words(fake_draco):
-    import numpy as np
-
-    from app.core.formats.other import read_drc
-    from app.core.meshdata import Budget
 
     assert _refusal(read_drc, b"PLY....", Budget()) == (
         "could not read the file as Draco: it does not start with 'DRACO'"
@@ -325,16 +297,10 @@ def test_draco_refusals_in_words(fake_draco):
     ],
 )
 def test_obj_refusals_name_the_obj_line(data, message):
-    from app.core.formats.obj import read_obj
-    from app.core.meshdata import Budget
-
     assert _refusal(read_obj, data, Budget()) == message
 
 
 def test_obj_face_counts_against_the_budget_one_per_triangle_and_a_short_line_counts_one():
-    from app.core.formats.obj import read_obj
-    from app.core.meshdata import Budget
-
     head = b"v 0 0 0\nv 1 0 0\nv 0 1 0\n"
     assert read_obj(head + b"f 1 2 3\n" * 8, Budget(1))[1].shape == (8, 3)  # exactly 8 x the limit
     assert _refusal(read_obj, head + b"f 1 2 3\n" * 8 + b"f 1 2\n", Budget(1)) == (
@@ -350,9 +316,6 @@ def test_obj_face_counts_against_the_budget_one_per_triangle_and_a_short_line_co
     ],
 )
 def test_obj_faces_without_usable_indices_are_refused_in_words(faces, message):
-    from app.core.formats.obj import read_obj
-    from app.core.meshdata import Budget
-
     assert _refusal(read_obj, b"v 0 0 0\nv 1 0 0\nv 0 1 0\n" + faces, Budget()) == message
 
 
@@ -392,16 +355,10 @@ _TETRA_OFF_VERTICES = b"0 0 0\n1 0 0\n0 1 0\n0 0 1\n"
     ],
 )
 def test_off_refusals_in_words(data, message):
-    from app.core.formats.off import read_off
-    from app.core.meshdata import Budget
-
     assert _refusal(read_off, data, Budget()) == message
 
 
 def test_off_comments_are_ignored_wherever_they_are():
-    from app.core.formats.off import read_off
-    from app.core.meshdata import Budget
-
     data = b"OFF # a tetrahedron\n# the counts\n4 1 0\n" + _TETRA_OFF_VERTICES + b"3 0 1 2 # one face\n"
     vertices, faces = read_off(data, Budget())
     assert vertices.shape == (4, 3) and faces.tolist() == [[0, 1, 2]]
@@ -442,16 +399,12 @@ def test_off_comments_are_ignored_wherever_they_are():
     ],
 )
 def test_off_header_and_counts_refusals_in_words(data, limit, message):
-    from app.core.formats.off import read_off
-    from app.core.meshdata import Budget
-
     assert _refusal(read_off, data, Budget(limit)) == message
 
 
 def _binary_stl(count: int, declared: int | None = None, header: bytes = b"\x00" * 80) -> bytes:
     import struct
 
-    import numpy as np
 
     records = np.zeros(count, dtype=[("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
     records["corners"] = np.arange(count * 9, dtype=np.float32).reshape(count, 3, 3)
@@ -467,10 +420,6 @@ def _ascii_stl(body: bytes, end: bytes = b"endsolid t\n") -> bytes:
 
 @pytest.mark.parametrize("lead", [b"", b"\n  "])
 def test_a_short_ascii_stl_is_read_even_after_leading_blanks(lead):
-    import numpy as np
-
-    from app.core.formats.stl import read_stl
-    from app.core.meshdata import Budget
 
     vertices, faces = read_stl(lead + _ascii_stl(_FACET), Budget())
     assert vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0]] and vertices.dtype == np.float64
@@ -479,10 +428,6 @@ def test_a_short_ascii_stl_is_read_even_after_leading_blanks(lead):
 
 @pytest.mark.parametrize("count", [0, 2])
 def test_a_binary_stl_of_exactly_its_declared_size_is_read(count):
-    import numpy as np
-
-    from app.core.formats.stl import read_stl
-    from app.core.meshdata import Budget
 
     vertices, faces = read_stl(_binary_stl(count), Budget())  # count 0: exactly 84 bytes
     assert vertices.dtype == np.float64 and faces.dtype == np.int64
@@ -545,9 +490,6 @@ _NO_VERTEX_84 = b"solid t\n" + b" " * (84 - len(b"solid t\nendsolid t\n")) + b"e
     ],
 )
 def test_stl_refusals_in_words(data, limit, message):
-    from app.core.formats.stl import read_stl
-    from app.core.meshdata import Budget
-
     assert _refusal(read_stl, data, Budget(limit)) == message
 
 
@@ -555,8 +497,6 @@ def test_stl_refusals_in_words(data, limit, message):
 
 
 def test_text_lines_drops_a_leading_bom_and_unifies_line_ends():
-    from app.core.formats.common import BOM, text_lines
-
     assert text_lines(BOM + b"a\r\nb\rc\n") == b"a\nb\nc\n"
     assert text_lines(b"a" + BOM) == b"a" + BOM  # only a leading mark is dropped
     assert text_lines(b"plain\n") == b"plain\n"
@@ -572,9 +512,6 @@ def test_text_lines_drops_a_leading_bom_and_unifies_line_ends():
     ],
 )
 def test_numbers_give_each_line_its_width(lines):
-    import numpy as np
-
-    from app.core.formats.common import numbers
 
     values, widths = numbers(lines, "a line")
     expected = [float(t) for line in lines for t in line.split()]
@@ -584,9 +521,6 @@ def test_numbers_give_each_line_its_width(lines):
 
 
 def test_numbers_and_indices_of_no_lines_are_empty():
-    import numpy as np
-
-    from app.core.formats.common import indices, numbers
 
     values, widths = numbers([], "a line")
     assert (
@@ -600,8 +534,6 @@ def test_numbers_and_indices_of_no_lines_are_empty():
 
 
 def test_indices_are_int64_and_a_zero_index_is_counted_by_splitting():
-    from app.core.formats.common import indices
-
     index, corners = indices([b"1 2 3", b"4 5 6 7"], "a face line")
     assert (
         index.tolist() == [1, 2, 3, 4, 5, 6, 7] and corners.tolist() == [3, 4] and str(index.dtype) == "int64"
@@ -616,8 +548,6 @@ def test_indices_are_int64_and_a_zero_index_is_counted_by_splitting():
 
 @pytest.mark.parametrize("lines", [[b"1 2 x"], [b"1 2 3", b"4 y"], [b"1 nan", b"2 3x"]])
 def test_a_token_that_is_not_a_number_is_refused_naming_the_line_kind(lines):
-    from app.core.formats.common import numbers
-
     assert (
         _refusal(numbers, lines, "a PLY vertex line")
         == "a PLY vertex line holds something that is not a number"
@@ -625,9 +555,6 @@ def test_a_token_that_is_not_a_number_is_refused_naming_the_line_kind(lines):
 
 
 def test_first_columns_takes_the_first_k_of_each_row():
-    import numpy as np
-
-    from app.core.formats.common import first_columns
 
     values = np.arange(10.0)
     np.testing.assert_array_equal(
@@ -640,9 +567,6 @@ def test_first_columns_takes_the_first_k_of_each_row():
 
 
 def test_fan_triangulate_fans_each_polygon_from_its_first_corner():
-    import numpy as np
-
-    from app.core.formats.common import fan_triangulate
 
     faces = fan_triangulate(np.array([0, 1, 2, 3, 4, 10, 11, 12, 5, 6, 7, 8]), np.array([5, 3, 4]))
     assert faces.tolist() == [[0, 1, 2], [0, 2, 3], [0, 3, 4], [10, 11, 12], [5, 6, 7], [5, 7, 8]]
@@ -651,9 +575,6 @@ def test_fan_triangulate_fans_each_polygon_from_its_first_corner():
 
 
 def test_whole_numbers_up_to_2_53_and_nothing_else():
-    import numpy as np
-
-    from app.core.formats.common import whole_numbers
 
     out = whole_numbers(np.array([0.0, 3.0, -2.0, 2.0**53]), "an index")
     assert out.dtype == np.int64 and out.tolist() == [0, 3, -2, 2**53]
@@ -683,9 +604,6 @@ def _ascii_ply(face_properties: bytes, faces: bytes) -> bytes:
     ],
 )
 def test_ascii_ply_faces_are_read_after_their_scalar_properties(properties, faces, expected):
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
-
     assert read_ply(_ascii_ply(properties, faces), Budget())[1].tolist() == expected
 
 
@@ -714,9 +632,6 @@ def test_ascii_ply_faces_are_read_after_their_scalar_properties(properties, face
     ],
 )
 def test_ascii_ply_face_refusals_in_words(properties, faces, message):
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
-
     assert _refusal(read_ply, _ascii_ply(properties, faces), Budget()) == message
 
 
@@ -737,8 +652,6 @@ def _binary_ply(face_count: int, faces: bytes) -> bytes:
 def test_binary_ply_faces_of_mixed_sizes_are_fanned():
     import struct
 
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
 
     data = _binary_ply(2, struct.pack("<B3i", 3, 0, 1, 2) + struct.pack("<B4i", 4, 0, 1, 2, 3))
     assert read_ply(data, Budget())[1].tolist() == [[0, 1, 2], [0, 1, 2], [0, 2, 3]]
@@ -757,9 +670,6 @@ def test_binary_ply_faces_of_mixed_sizes_are_fanned():
     ],
 )
 def test_binary_ply_face_refusals_in_words(count, faces, message):
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
-
     assert _refusal(read_ply, _binary_ply(count, faces), Budget()) == message
 
 
@@ -789,9 +699,6 @@ _PLY_VERTICES = b"0 0 0\n1 0 0\n0 1 0\n0 0 1\n"
     ],
 )
 def test_ascii_ply_headers_with_comments_and_elements_in_any_order_are_read(data):
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
-
     vertices, faces = read_ply(data, Budget())
     assert vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]] and faces.tolist() == [[0, 1, 2]]
 
@@ -815,9 +722,6 @@ def _ply_with_end_header_at(offset: int) -> bytes:
 
 
 def test_a_ply_header_may_end_at_1_mib_and_no_later():
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
-
     assert read_ply(_ply_with_end_header_at(1 << 20), Budget())[1].tolist() == [[0, 1, 2]]
     assert _refusal(read_ply, _ply_with_end_header_at((1 << 20) + 1), Budget()) == (
         "could not read the file as PLY: the header has no 'end_header'"
@@ -889,9 +793,6 @@ def test_a_ply_header_may_end_at_1_mib_and_no_later():
     ],
 )
 def test_ply_header_and_ascii_body_refusals_in_words(data, message):
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
-
     assert _refusal(read_ply, data, Budget()) == message
 
 
@@ -915,10 +816,6 @@ def _binary_ply_with_extras(padding: bytes = b"", vertex_bytes: int | None = Non
 
 @pytest.mark.parametrize("padding", [b"", b"\x00" * 64])
 def test_binary_ply_skips_list_elements_reads_past_scalars_and_allows_64_bytes_of_padding(padding):
-    import numpy as np
-
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
 
     vertices, faces = read_ply(_binary_ply_with_extras(padding), Budget())
     assert vertices.dtype == np.float64 and vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
@@ -937,9 +834,6 @@ def test_binary_ply_skips_list_elements_reads_past_scalars_and_allows_64_bytes_o
     ],
 )
 def test_binary_ply_size_refusals_in_words(data, message):
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
-
     assert _refusal(read_ply, data, Budget()) == message
 
 
@@ -967,8 +861,6 @@ _UCHAR_INT = b"property list uchar int vertex_indices\n"
 def test_a_binary_ply_whose_vertex_bytes_spell_end_header_is_read():
     import struct
 
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
 
     odd = struct.unpack("<3f", b"end_header\x00\x00")  # the header ends at the first end_header
     data = _ply_bytes([*_TRIANGLE, odd], _UCHAR_INT, struct.pack("<B3i", 3, 0, 1, 3), 1)
@@ -977,9 +869,6 @@ def test_a_binary_ply_whose_vertex_bytes_spell_end_header_is_read():
 
 
 def test_an_ascii_ply_ending_at_end_header_has_no_element_lines():
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
-
     data = _PLY_HEAD + b"element face 1\n" + _PLY_INDEX_LIST + b"end_header"
     assert _refusal(read_ply, data, Budget()) == (
         "the PLY header declares 5 element lines, but the file holds 0: it is truncated"
@@ -989,8 +878,6 @@ def test_an_ascii_ply_ending_at_end_header_has_no_element_lines():
 def test_binary_ply_vertices_last_may_end_exactly_at_the_end_of_the_file():
     import struct
 
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
 
     data = (
         b"ply\nformat binary_little_endian 1.0\nelement face 1\n"
@@ -1004,9 +891,6 @@ def test_binary_ply_vertices_last_may_end_exactly_at_the_end_of_the_file():
 
 
 def test_binary_ply_with_no_byte_after_the_header_says_0_bytes():
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
-
     assert _refusal(read_ply, _binary_ply_with_extras(vertex_bytes=0), Budget()) == (
         "the PLY header declares 4 'vertex' elements, but only 0 bytes are left for them:"
         " the file is truncated"
@@ -1039,19 +923,13 @@ def test_binary_ply_with_no_byte_after_the_header_says_0_bytes():
     ],
 )
 def test_binary_ply_face_truncation_and_corner_refusals_in_words(decl, faces, count, message):
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
-
     assert _refusal(read_ply, _ply_bytes(_TRIANGLE, decl, faces, count), Budget()) == message
 
 
 def test_binary_ply_mixed_size_faces_are_int64():
     import struct
 
-    import numpy as np
 
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
 
     data = _binary_ply(2, struct.pack("<B3i", 3, 0, 1, 2) + struct.pack("<B4i", 4, 0, 1, 2, 3))
     faces = read_ply(data, Budget())[1]
@@ -1061,8 +939,6 @@ def test_binary_ply_mixed_size_faces_are_int64():
 def test_a_binary_ply_of_one_triangle_and_nothing_after_it_is_read():
     import struct
 
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
 
     data = _ply_bytes(_TRIANGLE, _UCHAR_INT, struct.pack("<B3i", 3, 0, 1, 2), 1)
     assert read_ply(data, Budget())[1].tolist() == [[0, 1, 2]]
@@ -1071,8 +947,6 @@ def test_a_binary_ply_of_one_triangle_and_nothing_after_it_is_read():
 def test_a_binary_ply_face_with_a_scalar_equal_to_its_corner_count_is_read():
     import struct
 
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
 
     decl = b"property uchar flags\n" + _UCHAR_INT
     data = _ply_bytes(_TRIANGLE, decl, struct.pack("<BB3i", 3, 3, 0, 1, 2), 1)
@@ -1082,8 +956,6 @@ def test_a_binary_ply_face_with_a_scalar_equal_to_its_corner_count_is_read():
 def test_a_binary_ply_face_of_112_corners_is_fanned_from_its_own_bytes():
     import math
 
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
 
     ring = [(math.cos(i / 18), math.sin(i / 18), 0.0) for i in range(112)]  # 112 == ord("p"), as "ply"
     data = _ply_bytes(ring, b"property list uchar uchar vertex_indices\n", bytes([112, *range(112)]), 1)
@@ -1097,8 +969,6 @@ _SMALL_BUDGET = SimpleNamespace(unpacked_bytes=lambda: 30)  # what _buffers asks
 
 
 def _gltf_buffers(buffers, chunk=None, files=None, what="glTF"):
-    from app.core.formats.gltf import _buffers
-
     return _buffers({"buffers": buffers} if buffers is not None else {}, chunk, files, what, _SMALL_BUDGET)
 
 
@@ -1158,8 +1028,6 @@ def test_gltf_buffer_refusals_in_words(buffers, chunk, what, message):
 def test_a_binary_ply_face_record_missing_entirely_is_truncated_in_words():
     import struct
 
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
 
     data = _ply_bytes(_TRIANGLE, _UCHAR_INT, struct.pack("<B3i", 3, 0, 1, 2), 2)  # the second face is absent
     assert _refusal(read_ply, data, Budget()) == (
@@ -1179,9 +1047,6 @@ def test_a_binary_ply_face_record_missing_entirely_is_truncated_in_words():
     ],
 )
 def test_a_ply_vertex_element_without_xyz_or_with_a_list_is_refused_in_words(vertex_properties, vertex_lines):
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
-
     data = (
         b"ply\nformat ascii 1.0\nelement vertex 3\n"
         + vertex_properties
@@ -1208,9 +1073,6 @@ def _ascii_ply_with_edges(count: bytes) -> bytes:
 
 
 def test_a_ply_element_may_declare_up_to_64_per_byte_of_the_file():
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
-
     size = len(_ascii_ply_with_edges(b"00000"))
     assert 10000 <= 64 * size < 100000  # five digits either way
     assert _refusal(read_ply, _ascii_ply_with_edges(b"%d" % (64 * size)), Budget()) == (
@@ -1247,16 +1109,10 @@ def test_a_ply_element_may_declare_up_to_64_per_byte_of_the_file():
     ],
 )
 def test_ply_element_refusals_in_words(data, message):
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import Budget
-
     assert _refusal(read_ply, data, Budget()) == message
 
 
 def test_ply_declared_counts_are_checked_against_the_budget_in_words():
-    from app.core.formats.ply import read_ply
-    from app.core.meshdata import FACE_FACTOR, RAW_VERTEX_FACTOR, Budget
-
     budget = Budget(max_vertices=1)
     many = RAW_VERTEX_FACTOR + 1
     head = b"ply\nformat ascii 1.0\nelement vertex %d\nproperty float x\nproperty float y\nproperty float z\n"
@@ -1278,7 +1134,6 @@ def test_the_canonical_glb_is_a_well_formed_glb_with_8_byte_aligned_buffers():
     import json
     import struct
 
-    from app.core.formats.gltf import _canonical_glb
 
     doc = {
         "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "material": 0}]}],
@@ -1314,7 +1169,6 @@ def test_a_canonical_glb_of_a_document_without_views_or_meshes_has_no_binary_chu
     import json
     import struct
 
-    from app.core.formats.gltf import _canonical_glb
 
     glb = _canonical_glb({"asset": {"version": "2.0"}}, [])
     json_length, json_type = struct.unpack_from("<II", glb, 12)
@@ -1329,9 +1183,6 @@ def test_a_canonical_glb_of_a_document_without_views_or_meshes_has_no_binary_chu
 @pytest.mark.parametrize("name", ["EXT_meshopt_compression", "KHR_meshopt_compression"])
 @pytest.mark.parametrize("key", ["extensionsUsed", "extensionsRequired"])
 def test_meshopt_is_refused_whether_used_or_required_naming_the_extension(name, key):
-    from app.core.formats.gltf import _check_extensions
-    from app.core.meshdata import UnsupportedFormatError
-
     with pytest.raises(UnsupportedFormatError) as info:
         _check_extensions({key: ["KHR_draco_mesh_compression", name]})
     assert str(info.value) == (
@@ -1341,9 +1192,6 @@ def test_meshopt_is_refused_whether_used_or_required_naming_the_extension(name, 
 
 
 def test_gpu_instancing_is_refused_only_when_required():
-    from app.core.formats.gltf import _check_extensions
-    from app.core.meshdata import UnsupportedFormatError
-
     _check_extensions({})
     _check_extensions({"extensionsUsed": ["EXT_mesh_gpu_instancing", "KHR_draco_mesh_compression"]})
     with pytest.raises(UnsupportedFormatError) as info:
@@ -1358,8 +1206,6 @@ _VIEW_PAST = "a glTF buffer view runs past the end of its buffer: the file is co
 
 
 def test_gltf_buffer_views_must_lie_inside_their_buffer():
-    from app.core.formats.gltf import _check_views
-
     buffers = [b"", b"x" * 10]
     _check_views({}, buffers)
     _check_views({"bufferViews": [{"buffer": 1, "byteOffset": 4, "byteLength": 6}]}, buffers)
@@ -1381,8 +1227,6 @@ def _accessor_doc(accessor: dict, view_length: int, stride: int | None = None) -
 
 
 def test_gltf_accessors_must_fit_their_view_for_every_component_type_and_width():
-    from app.core.formats.gltf import _check_views
-
     sizes = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
     widths = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
     buffers = [b"\0" * 1024]
@@ -1397,8 +1241,6 @@ def test_gltf_accessors_must_fit_their_view_for_every_component_type_and_width()
 
 
 def test_gltf_accessor_sizes_count_the_offset_and_the_stride():
-    from app.core.formats.gltf import _check_views
-
     buffers = [b"\0" * 1024]
     accessor = {"componentType": 5126, "type": "VEC3", "count": 2, "byteOffset": 4}
     _check_views(_accessor_doc(accessor, 28), buffers)  # 4 + 12 + 12
@@ -1415,8 +1257,6 @@ def test_gltf_accessor_sizes_count_the_offset_and_the_stride():
 
 
 def test_gltf_accessors_without_a_view_or_elements_are_not_measured_and_negative_counts_refused():
-    from app.core.formats.gltf import _check_views
-
     buffers = [b""]
     _check_views({"accessors": [{"componentType": 5126, "type": "VEC3", "count": 5}]}, buffers)
     _check_views({"accessors": [{"bufferView": 7, "componentType": 1, "type": "?", "count": 0}]}, buffers)
@@ -1438,8 +1278,6 @@ _SCENE = "the glTF scene (each mesh counted once per node that places it)"
 
 
 def test_gltf_counts_each_mesh_once_per_node_that_places_it():
-    from app.core.formats.gltf import _check_counts
-
     doc = {
         "accessors": [{"count": 4}, {"count": 7}, {"count": 5}],
         "meshes": [
@@ -1464,8 +1302,6 @@ def test_gltf_counts_each_mesh_once_per_node_that_places_it():
     ],
 )
 def test_gltf_scenes_may_expand_to_a_billion_vertices_or_faces_and_no_more(positions, indices, message):
-    from app.core.formats.gltf import _check_counts
-
     primitive = {"attributes": {"POSITION": 0}}
     accessors = [{"count": positions}]
     if indices is not None:
@@ -1481,8 +1317,6 @@ def test_gltf_scenes_may_expand_to_a_billion_vertices_or_faces_and_no_more(posit
 
 
 def test_gltf_instances_follow_the_chosen_scene_and_multiply_shared_children():
-    from app.core.formats.gltf import MAX_INSTANCES, _instances
-
     nodes = [{"children": [1, 1]}, {"children": [2, 2]}, {}]
     assert _instances({"nodes": nodes, "scenes": [{"nodes": [0]}]}) == [1, 2, 4]
     assert _instances({"nodes": nodes, "scenes": [{"nodes": [1]}, {"nodes": [0]}]}) == [0, 1, 2]
@@ -1498,8 +1332,6 @@ def test_gltf_instances_follow_the_chosen_scene_and_multiply_shared_children():
     "nodes", [[{"children": [1]}, {"children": [0]}], [{"children": [0]}], [{}, {"children": [1]}]]
 )
 def test_a_gltf_node_cycle_is_refused_in_words(nodes):
-    from app.core.formats.gltf import _instances
-
     assert (
         _refusal(_instances, {"nodes": nodes}) == "the glTF node hierarchy has a cycle: the file is corrupt"
     )
@@ -1521,9 +1353,6 @@ def test_a_gltf_node_cycle_is_refused_in_words(nodes):
     ],
 )
 def test_gltf_json_refusals_in_words(data, message):
-    from app.core.formats.gltf import read_gltf
-    from app.core.meshdata import Budget
-
     assert _refusal(read_gltf, data, Budget()) == message
 
 
@@ -1541,8 +1370,6 @@ _J, _B = 0x4E4F534A, 0x004E4942
 
 
 def test_glb_chunks_first_json_and_first_binary_with_or_without_padding():
-    from app.core.formats.gltf import _split_glb
-
     doc, chunk = _split_glb(_glb_of((_J, b'{"a": 1}'), (7, b"skip"), (_B, b"bin!"), (_J, b"{}"), (_B, b"no")))
     assert doc == {"a": 1} and chunk == b"bin!"
     assert _split_glb(_glb_of((_J, b"{}  "))) == ({}, None)
@@ -1578,17 +1405,12 @@ def test_glb_chunks_first_json_and_first_binary_with_or_without_padding():
     ],
 )
 def test_glb_container_refusals_in_words(data, message):
-    from app.core.formats.gltf import read_glb
-    from app.core.meshdata import Budget
-
     assert _refusal(read_glb, data, Budget()) == message
 
 
 def test_a_glb_chunk_past_the_end_and_glb_1_are_refused_in_words():
     import struct
 
-    from app.core.formats.gltf import read_glb
-    from app.core.meshdata import Budget, UnsupportedFormatError
 
     cut = b"glTF" + struct.pack("<II", 2, 24) + struct.pack("<II", 5, _J) + b"{}  "  # 5 declared, 4 there
     assert _refusal(read_glb, cut, Budget()) == "a GLB chunk runs past the end of the file: it is truncated"
@@ -1619,9 +1441,6 @@ def _tetra_bin() -> bytes:
 
 
 def test_a_zip_with_one_gltf_beside_mac_leftovers_and_folders_reads_its_files_relative_to_it():
-    from app.core.formats.gltf import read_zip
-    from app.core.meshdata import Budget
-
     data = _zip(
         {
             "m/": b"",
@@ -1656,9 +1475,6 @@ def test_a_zip_with_one_gltf_beside_mac_leftovers_and_folders_reads_its_files_re
     ],
 )
 def test_zip_refusals_in_words(members, message):
-    from app.core.formats.gltf import read_zip
-    from app.core.meshdata import Budget
-
     assert _refusal(read_zip, _zip(members), Budget()) == message
 
 
@@ -1666,8 +1482,6 @@ def test_a_glb_in_a_zip_uses_its_binary_chunk():
     import json
     import struct
 
-    from app.core.formats.gltf import read_zip
-    from app.core.meshdata import Budget
 
     doc = json.loads(_tetra_gltf(""))
     del doc["buffers"][0]["uri"]
@@ -1680,16 +1494,12 @@ def test_a_glb_in_a_zip_uses_its_binary_chunk():
 
 
 def test_a_gltf_mesh_without_primitives_counts_nothing():
-    from app.core.formats.gltf import _check_counts
-
     budget, calls = _recorder()
     _check_counts({"meshes": [{}], "nodes": [{"mesh": 0}, {"mesh": 0}]}, budget)
     assert calls == [("vertices", 0, _SCENE), ("faces", 0, _SCENE)]
 
 
 def test_gltf_instances_wait_for_every_parent_and_count_a_root_listed_twice():
-    from app.core.formats.gltf import _instances
-
     # node 2 has two parents; its child 3 is counted only once both have been added
     assert _instances({"nodes": [{"children": [2]}, {"children": [2]}, {"children": [3]}, {}]}) == [
         1,
@@ -1704,7 +1514,6 @@ def test_the_canonical_glb_keeps_each_meshs_other_keys_and_a_mesh_without_primit
     import json
     import struct
 
-    from app.core.formats.gltf import _canonical_glb
 
     doc = {"meshes": [{"name": "a", "weights": [0.5], "primitives": [{"mode": 4}]}, {"name": "b"}]}
     glb = _canonical_glb(doc, [])
@@ -1716,8 +1525,6 @@ def test_the_canonical_glb_keeps_each_meshs_other_keys_and_a_mesh_without_primit
 
 
 def test_a_gltf_accessor_after_one_without_a_view_is_still_measured():
-    from app.core.formats.gltf import _check_views
-
     doc = _accessor_doc({"componentType": 5126, "type": "VEC3", "count": 2}, 23)
     doc["accessors"].insert(0, {"componentType": 5126, "type": "VEC3", "count": 5})  # no bufferView
     doc["accessors"].insert(1, {"bufferView": 0, "componentType": 5126, "type": "VEC3", "count": 0})
@@ -1728,14 +1535,10 @@ def test_a_gltf_accessor_after_one_without_a_view_is_still_measured():
 
 
 def test_an_empty_glb_binary_chunk_right_after_unpadded_json_is_read():
-    from app.core.formats.gltf import _split_glb
-
     assert _split_glb(_glb_of((_J, b"{}"), (_B, b""))) == ({}, b"")  # its 8-byte header ends the file
 
 
 def test_a_gltf_without_nodes_places_no_mesh():
-    from app.core.formats.gltf import _check_counts
-
     budget, calls = _recorder()
     _check_counts(
         {"accessors": [{"count": 3}], "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}]}, budget
@@ -1747,8 +1550,6 @@ def test_a_gltf_of_points_only_is_refused_naming_gltf():
     import base64
     import json
 
-    from app.core.formats.gltf import read_gltf
-    from app.core.meshdata import Budget
 
     doc = json.loads(_tetra_gltf("data:;base64," + base64.b64encode(_tetra_bin()).decode()))
     doc["meshes"][0]["primitives"] = [{"attributes": {"POSITION": 0}, "mode": 0}]  # points
@@ -1758,9 +1559,6 @@ def test_a_gltf_of_points_only_is_refused_naming_gltf():
 
 
 def test_glb_header_fields_are_unsigned_in_messages():
-    from app.core.formats.gltf import read_glb
-    from app.core.meshdata import Budget, UnsupportedFormatError
-
     with pytest.raises(UnsupportedFormatError) as info:
         read_glb(_glb_of((_J, b"{}"), version=2**31), Budget())
     assert str(info.value) == "unsupported mesh format: glTF 2147483648.0 is not supported: export glTF 2.0"
@@ -1772,8 +1570,6 @@ def test_glb_header_fields_are_unsigned_in_messages():
 def test_a_glb_chunk_size_of_2_gib_runs_past_the_end():
     import struct
 
-    from app.core.formats.gltf import read_glb
-    from app.core.meshdata import Budget
 
     data = b"glTF" + struct.pack("<II", 2, 24) + struct.pack("<II", 2**31, _J) + b"{}  "
     assert _refusal(read_glb, data, Budget()) == "a GLB chunk runs past the end of the file: it is truncated"
@@ -1783,7 +1579,6 @@ def test_a_glb_chunk_size_of_2_gib_runs_past_the_end():
 def test_glb_padding_after_a_json_chunk_of_any_length_is_skipped(text):
     import struct
 
-    from app.core.formats.gltf import _split_glb
 
     body = (
         struct.pack("<II", len(text), _J)
@@ -1808,9 +1603,6 @@ def test_glb_padding_after_a_json_chunk_of_any_length_is_skipped(text):
     ],
 )
 def test_zip_mac_folders_and_folder_entries_are_not_files(members, message):
-    from app.core.formats.gltf import read_zip
-    from app.core.meshdata import Budget
-
     assert _refusal(read_zip, _zip(members), Budget()) == message
 
 
@@ -1831,9 +1623,6 @@ def _damaged(members: dict[str, bytes], name: str) -> bytes:
 
 
 def test_a_zip_upload_that_is_no_zip_is_refused_as_a_zip():
-    from app.core.formats.gltf import read_zip
-    from app.core.meshdata import Budget
-
     message = _refusal(read_zip, b"PK\x03\x04 but not an archive", Budget())
     assert message == "could not read the file as zip: it is not a valid zip archive"
 
@@ -1842,9 +1631,6 @@ def test_a_zip_upload_that_is_no_zip_is_refused_as_a_zip():
 def test_a_zip_member_that_does_not_unpack_is_named_with_the_zip_archive(damaged):
     """The model and the file it refers to are unpacked as members of the zip archive, and a damaged
     one is named in words (not zlib's)."""
-    from app.core.formats.gltf import read_zip
-    from app.core.meshdata import Budget
-
     members = {"m/a.gltf": _tetra_gltf("t.bin"), "m/t.bin": _tetra_bin()}
     assert len(read_zip(_zip(members, zipfile.ZIP_DEFLATED), Budget())[1]) == 4  # intact: read
     message = _refusal(read_zip, _damaged(members, damaged), Budget())
@@ -1854,9 +1640,6 @@ def test_a_zip_member_that_does_not_unpack_is_named_with_the_zip_archive(damaged
 def test_a_folder_entry_is_never_read_as_a_file_the_gltf_names():
     """A uri resolving to "/" names the archive's root folder entry "/" exactly (normpath keeps a lone
     slash): it is a folder, so the file is missing, not read as empty bytes."""
-    from app.core.formats.gltf import read_zip
-    from app.core.meshdata import Budget
-
     data = _zip({"a.gltf": _tetra_gltf("/"), "/": b""})
     assert "/" in zipfile.ZipFile(io.BytesIO(data)).namelist()
     assert _refusal(read_zip, data, Budget()) == "the glTF refers to '/', which is not in the .zip"
@@ -1879,8 +1662,6 @@ def test_a_glb_in_a_zip_reads_the_files_it_refers_to_and_is_named_glb():
     refusals name it GLB."""
     import json
 
-    from app.core.formats.gltf import read_zip
-    from app.core.meshdata import Budget
 
     doc = json.loads(_tetra_gltf("t.bin"))
     vertices, faces = read_zip(_zip({"x/model.glb": _glb(doc), "x/t.bin": _tetra_bin()}), Budget())
@@ -1897,9 +1678,6 @@ def test_a_glb_in_a_zip_reads_the_files_it_refers_to_and_is_named_glb():
 def test_an_stl_is_taken_for_ascii_only_when_solid_begins_within_its_first_kib(blanks, ascii):
     """'solid' ending at byte 1024 is seen; one byte later it is past the sniffed window, and the file is
     read as binary: its 'header' (blanks) declares 0x20202020 triangles, so it is refused as such."""
-    from app.core.formats.stl import read_stl
-    from app.core.meshdata import Budget
-
     data = b" " * blanks + _ascii_stl(_FACET)
     if ascii:
         assert read_stl(data, Budget())[1].tolist() == [[0, 1, 2]]
@@ -1911,9 +1689,6 @@ def test_an_stl_is_taken_for_ascii_only_when_solid_begins_within_its_first_kib(b
 def test_a_nul_makes_an_stl_binary_only_within_its_first_kib(nul_at, ascii):
     """A NUL byte in the sniffed window marks a binary file that happens to start with 'solid' (some
     exporters write it in the header); past the window it is text the vertex lines never read."""
-    from app.core.formats.stl import read_stl
-    from app.core.meshdata import Budget
-
     name = b"solid " + b"n" * (nul_at - 6) + b"\x00\n"  # the solid's name line, its NUL at nul_at
     data = name + _FACET + b"endsolid t\n"
     assert data.index(b"\x00") == nul_at
@@ -1927,9 +1702,6 @@ def test_a_nul_makes_an_stl_binary_only_within_its_first_kib(nul_at, ascii):
 def test_an_ascii_stl_is_cut_when_no_endsolid_begins_in_its_last_4_kib(tail, whole):
     """A second solid whose facets are not followed by 'endsolid' was cut; the check looks for
     'endsolid' in the last 4096 bytes, so the first solid's 'endsolid' counts only if it starts there."""
-    from app.core.formats.stl import read_stl
-    from app.core.meshdata import Budget
-
     first = b"solid a\n" + _FACET + b"endsolid a\n"
     name_length = tail - len(b"endsolid a\n") - len(b"solid \n") - len(_FACET)
     data = first + b"solid " + b"b" * name_length + b"\n" + _FACET  # cut: no endsolid b

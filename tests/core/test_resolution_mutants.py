@@ -42,17 +42,15 @@ def scripted(monkeypatch, steps):
     return calls
 
 
-def test_a_first_pass_at_exactly_1_1_times_the_target_is_enough(monkeypatch):
-    first = fake(11)  # 1.1 * 10 == 11.0 exactly
-    calls = scripted(monkeypatch, [first, fake(10)])
-    assert resolution._collapse(fake(100), 10) is first
-    assert calls == [resolution.QUADRIC_RUNGS[0]]
-
-
-def test_a_first_pass_below_1_1_times_the_target_is_enough(monkeypatch):
-    first = fake(105)
-    calls = scripted(monkeypatch, [first, fake(100)])
-    assert resolution._collapse(fake(1000), 100) is first
+@pytest.mark.parametrize(("faces", "target"), [
+    (11, 10),  # 1.1 * 10 == 11.0 exactly: close enough
+    (105, 100),  # below 1.1 times the target
+    (301, 100),  # past the stall ratio (STALLED * 100 = 300): further rungs would not help
+])
+def test_the_first_pass_is_kept_when_close_enough_or_stalled(monkeypatch, faces, target):
+    first = fake(faces)
+    calls = scripted(monkeypatch, [first, fake(target)])
+    assert resolution._collapse(fake(10 * target), target) is first
     assert calls == [resolution.QUADRIC_RUNGS[0]]
 
 
@@ -61,13 +59,6 @@ def test_a_first_pass_at_exactly_the_stall_ratio_goes_on_to_the_next_rungs(monke
     calls = scripted(monkeypatch, [fake(300), second, third])  # 300 == STALLED * 100: not stalled
     assert resolution._collapse(fake(1000), 100) is third
     assert calls == list(resolution.QUADRIC_RUNGS)
-
-
-def test_a_first_pass_past_the_stall_ratio_stops(monkeypatch):
-    first = fake(301)
-    calls = scripted(monkeypatch, [first, fake(100)])
-    assert resolution._collapse(fake(1000), 100) is first
-    assert calls == [resolution.QUADRIC_RUNGS[0]]
 
 
 def test_a_rung_cleaning_refuses_is_skipped_and_the_next_one_tried(monkeypatch):
