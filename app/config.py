@@ -47,8 +47,8 @@ class DescribeSettings(BaseModel):
 class EncodeSettings(BaseModel):
     """How a description becomes a BoF vector (SHAPEBAG_ENCODE__MODE=soft ...)."""
 
-    mode: str = "hard"
-    sigma_scale: float = 1.0
+    mode: str = EncodeParams.mode
+    sigma_scale: float = EncodeParams.sigma_scale
     keypoints_only: bool = False
     area_weighted: bool = EncodeParams.area_weighted
     fusion: bool = True  # append the scaled Shape-DNA when the vocabulary has fusion scales (app.core.fusion)

@@ -9,6 +9,7 @@ from app.cli import CommandError
 from app.core.hks import TIME_RANGES
 from app.core.laplacian import LAPLACIANS
 from app.core.smoothing import WEIGHTS
+from app.core.vocabulary import EncodeParams
 from app.services.evaluation import (
     DEFAULT_CACHE,
     ROW_NAMES,
@@ -32,7 +33,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--runs", default=",".join(ROW_NAMES),
                    help=f"comma-separated rows (default: all): {', '.join(ROW_NAMES)}")
     p.add_argument("--vocabulary-size", type=int, default=64, help="words per vocabulary (default 64)")
-    p.add_argument("--mode", choices=("hard", "soft"), default="hard", help="vector quantisation")
+    p.add_argument("--mode", choices=("hard", "soft"), default=EncodeParams.mode,
+                   help=f"vector quantisation: hard (eq. 6) or soft (eq. 5; default {EncodeParams.mode})")
+    p.add_argument("--sigma-scale", type=float, default=EncodeParams.sigma_scale,
+                   help="soft VQ width σ, as a multiple of the vocabulary's median quantisation distance "
+                   f"(default {EncodeParams.sigma_scale:g})")
     scope = p.add_mutually_exclusive_group()
     scope.add_argument("--keypoints-only", action="store_true", help="BoF over the keypoints only")
     scope.add_argument("--all-vertices", action="store_true", help="BoF over every vertex (default)")
@@ -110,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
         rows=rows,
         vocabulary_size=args.vocabulary_size,
         mode=args.mode,
+        sigma_scale=args.sigma_scale,
         keypoints_only=args.keypoints_only,
         area_weighted=args.area_weighted,
         keypoint_filter=(EvaluationOptions.keypoint_filter if args.keypoint_filter is None

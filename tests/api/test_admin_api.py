@@ -120,11 +120,11 @@ def test_restart_reconciles_a_missing_or_corrupt_index(data_dir):
 def test_index_rebuild_reencodes_every_model_with_the_current_encode_settings(data_dir):
     from app.config import EncodeSettings
 
-    settings = make_settings(data_dir, encode=EncodeSettings(mode="soft"))  # the seed was encoded "hard"
+    settings = make_settings(data_dir, encode=EncodeSettings(mode="hard"))  # the seed was encoded "soft"
     ctx = open_context(settings)
     with ctx.db.read() as conn:
         vid = vocab_repo.active(conn).id
-        hard_ids, hard, _ = vocab_repo.vectors(conn, vid)
+        soft_ids, soft, _ = vocab_repo.vectors(conn, vid)
     with TestClient(create_app(settings)) as client:
         models = client.get("/models", params={"limit": 100}).json()["data"]
         before = _answers(client, models)
@@ -132,10 +132,9 @@ def test_index_rebuild_reencodes_every_model_with_the_current_encode_settings(da
         done = wait_job(client, job["job_id"])
         assert done["state"] == "done" and done["result"]["models"] == len(models)
         wait_for(lambda: _answers(client, models) != before, timeout_s=20)  # the live index follows
-        after = _answers(client, models)
-    assert all(hits[0][1] > 0 for hits in after)  # soft BoFs of different shapes never coincide
+    assert all(hits[0][1] > 0 for hits in before)  # soft BoFs of different shapes never coincide
     with ctx.db.read() as conn:
-        soft_ids, soft, _ = vocab_repo.vectors(conn, vid)
+        hard_ids, hard, _ = vocab_repo.vectors(conn, vid)
     assert sorted(soft_ids) == sorted(hard_ids)
     hard, soft = hard[np.argsort(hard_ids)], soft[np.argsort(soft_ids)]  # rows come in seq order: align by id
     assert ((soft > 0).sum(axis=1) > (hard > 0).sum(axis=1)).all()  # soft VQ spreads weight over more words

@@ -103,7 +103,9 @@ def test_vocabulary_with_fusion_encodes_the_fused_vector_and_keeps_its_scales(tm
     again = Vocabulary.load(vocab.save(tmp_path / "v"))
     assert again.fusion == scales and np.array_equal(again.encode(d), fused)
     # the scale is the median of BoFs encoded one way; the vocabulary says which
-    assert again.metadata["encode"] == {"mode": "hard", "keypoints_only": False, "area_weighted": True}
+    assert again.metadata["encode"] == {
+        "mode": "soft", "sigma_scale": 1.0, "keypoints_only": False, "area_weighted": True
+    }
     by_count = EncodeParams(area_weighted=False)
     counted = plain.with_fusion(descs, by_count, weight=0.5)
     assert counted.metadata["encode"]["area_weighted"] is False

@@ -35,11 +35,11 @@ WORDS = np.array([[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0]], np.float32)
 def test_hard_vq_assigns_the_nearest_word_and_counts():
     vocab = Vocabulary(WORDS, run="run5", sigma=0.5)
     p = np.array([[0.1, 0, 0, 0], [0.9, 0.2, 0, 0], [0.2, 0.7, 0, 0], [0.8, 0, 0, 0]])
-    per_vertex = EncodeParams(normalize=False, area_weighted=False)
+    per_vertex = EncodeParams(mode="hard", normalize=False, area_weighted=False)
     bof = vocab.encode(make_description(h_with_run5(p)), per_vertex)
     assert bof.tolist() == [1.0, 2.0, 1.0]  # eq. 8: Σ θ(x)
-    assert np.allclose(vocab.encode(make_description(h_with_run5(p)), EncodeParams(area_weighted=False)),
-                       [0.25, 0.5, 0.25])
+    assert np.allclose(vocab.encode(make_description(h_with_run5(p)),
+                                    EncodeParams(mode="hard", area_weighted=False)), [0.25, 0.5, 0.25])
 
 
 def test_soft_vq_rows_sum_to_one_and_tend_to_hard_as_sigma_shrinks():
@@ -60,13 +60,34 @@ def test_keypoints_only_and_area_weighting():
     p = np.array([[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0]], float)
     d = make_description(h_with_run5(p), keypoints=np.array([True, True, False]),
                          weights=np.array([0.5, 0.25, 0.25]))
-    by_count = EncodeParams(keypoints_only=True, area_weighted=False)
+    by_count = EncodeParams(mode="hard", keypoints_only=True, area_weighted=False)
     assert np.allclose(vocab.encode(d, by_count), [0.5, 0.5, 0.0])
-    assert np.allclose(vocab.encode(d, EncodeParams(keypoints_only=True)), [2 / 3, 1 / 3, 0.0])
-    assert np.allclose(vocab.encode(d, EncodeParams(area_weighted=True)), [0.5, 0.25, 0.25])
+    assert np.allclose(vocab.encode(d, EncodeParams(mode="hard", keypoints_only=True)), [2 / 3, 1 / 3, 0.0])
+    assert np.allclose(vocab.encode(d, EncodeParams(mode="hard", area_weighted=True)), [0.5, 0.25, 0.25])
     # the default is eq. 7, the integral over the surface: each vertex by its lumped area
-    assert np.allclose(vocab.encode(d), [0.5, 0.25, 0.25])
-    assert np.allclose(vocab.encode(d, EncodeParams(area_weighted=False)), [1 / 3, 1 / 3, 1 / 3])
+    assert np.allclose(vocab.encode(d, EncodeParams(mode="hard")), [0.5, 0.25, 0.25])
+    assert np.allclose(vocab.encode(d, EncodeParams(mode="hard", area_weighted=False)), [1 / 3, 1 / 3, 1 / 3])
+    # soft VQ (the default) integrates θ(x) the same way: Σ_x w(x) θ(x) / Σ_x w(x)
+    theta = vocab.quantize(p, EncodeParams())
+    assert np.allclose(vocab.encode(d), np.array([0.5, 0.25, 0.25]) @ theta, atol=1e-6)
+    assert np.allclose(vocab.encode(d, EncodeParams(keypoints_only=True)), (2 * theta[0] + theta[1]) / 3,
+                       atol=1e-6)
+
+
+def test_soft_vq_is_the_default_with_sigma_the_vocabulary_s_quantisation_distance():
+    """Soft VQ is served (issue 11, round 7); σ = 1 × the vocabulary's median quantisation distance."""
+    assert EncodeParams().mode == "soft" and EncodeParams().sigma_scale == 1.0
+    vocab = Vocabulary(WORDS, run="run5", sigma=0.5)
+    p = np.array([[0.45, 0.0, 0, 0]])  # nearly half-way between words 0 and 1
+    theta = vocab.quantize(p)[0]
+    # by hand: exp(-0.45² / 2σ²), exp(-0.55² / 2σ²), exp(-(0.45² + 1) / 2σ²), normalised
+    e = np.exp(-np.array([0.2025, 0.3025, 1.2025]) / 0.5)
+    assert np.allclose(theta, e / e.sum())
+    # a descriptor that crosses the border moves its mass a little, not all of it (hard VQ: all)
+    across = vocab.quantize(np.array([[0.55, 0.0, 0, 0]]))[0]
+    assert abs(across[0] - theta[0]) < 0.2
+    hard = EncodeParams(mode="hard")
+    assert vocab.quantize(p, hard)[0, 0] - vocab.quantize(np.array([[0.55, 0.0, 0, 0]]), hard)[0, 0] == 1.0
 
 
 def test_l1_distance_by_hand():
@@ -114,3 +135,13 @@ def test_the_shipped_vocabulary_is_fit_for_the_describe_defaults_and_fused():
     assert vocab.size == 64 and vocab.run == "run5"
     assert vocab.fusion is not None and vocab.dimension() == 64 + vocab.fusion.count
     assert vocab.dimension(EncodeParams(fusion=False)) == 64
+
+
+def test_encoding_records_sigma_for_soft_bofs_only():
+    """A vocabulary's fusion scale is the median of BoFs encoded one way; σ changes soft BoFs only."""
+    assert EncodeParams(mode="soft", sigma_scale=0.7).encoding() == {
+        "mode": "soft", "sigma_scale": 0.7, "keypoints_only": False, "area_weighted": True
+    }
+    assert EncodeParams(mode="hard", sigma_scale=0.7).encoding() == {
+        "mode": "hard", "keypoints_only": False, "area_weighted": True
+    }

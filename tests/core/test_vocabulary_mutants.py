@@ -171,9 +171,10 @@ def test_bof_uses_the_vocabulary_run_the_mode_and_float32():
     d5 = description(p)
     soft = EncodeParams(mode="soft")
     out = vocab.encode(d5, soft)
-    assert out.dtype == np.float32 and vocab.encode(d5).dtype == np.float32
+    hard = EncodeParams(mode="hard")
+    assert out.dtype == np.float32 and vocab.encode(d5, hard).dtype == np.float32
     assert np.allclose(out, vocab.quantize(p, soft).mean(axis=0), atol=1e-6)
-    assert not np.allclose(out, vocab.encode(d5))  # soft is not hard
+    assert not np.allclose(out, vocab.encode(d5, hard))  # soft is not hard
 
 
 def test_bof_normalises_by_the_total_weight_and_an_empty_selection_is_zero():
@@ -187,7 +188,7 @@ def test_bof_normalises_by_the_total_weight_and_an_empty_selection_is_zero():
         eigenvalues=half.eigenvalues,
         input_vertices=2,
     )
-    assert np.allclose(vocab.encode(half, EncodeParams(area_weighted=True)), [0.25, 0.75, 0.0])
+    assert np.allclose(vocab.encode(half, EncodeParams(mode="hard", area_weighted=True)), [0.25, 0.75, 0.0])
     nothing = vocab.encode(half, EncodeParams(keypoints_only=True))
     assert np.array_equal(nothing, np.zeros(3, np.float32))  # no keypoint: zero, not 0/0
 

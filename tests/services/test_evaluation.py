@@ -175,6 +175,9 @@ def test_bad_folders_give_clear_errors(folder: Path, tmp_path: Path) -> None:
         evaluate(broken, _options(tmp_path / "c", rows=("run5",)))
     with pytest.raises(EvaluationError, match="unknown row"):
         evaluate(folder, _options(tmp_path / "c", rows=("run9",)))
+    for sigma in (0.0, -1.0, float("nan")):
+        with pytest.raises(EvaluationError, match="--sigma-scale must be > 0"):
+            evaluate(folder, _options(tmp_path / "c", rows=("run5",), sigma_scale=sigma))
 
 
 def test_command_prints_the_table_and_writes_json(
@@ -349,10 +352,11 @@ def test_command_passes_the_new_flags(folder: Path, tmp_path: Path, monkeypatch:
     command.register(parser.add_subparsers())
     args = parser.parse_args(["evaluate", str(folder), "--queries", str(tmp_path), "--fusion", "0.5, 1",
                               "--filter", "--time-range", "weyl", "--smoothing-weights", "cotangent",
-                              "--area-weighted"])
+                              "--area-weighted", "--mode", "hard", "--sigma-scale", "0.7"])
     with pytest.raises(CommandError, match="stop here"):
         args.func(args)
     opts = seen[0]
+    assert (opts.mode, opts.sigma_scale) == ("hard", 0.7)
     assert opts.queries == tmp_path and opts.fusion == (0.5, 1.0) and opts.keypoint_filter
     assert (opts.time_range, opts.smoothing_weights, opts.area_weighted) == ("weyl", "cotangent", True)
     # without --filter/--no-filter the default is DescribeParams'
@@ -361,6 +365,7 @@ def test_command_passes_the_new_flags(folder: Path, tmp_path: Path, monkeypatch:
         plain.func(plain)
     assert seen[1].keypoint_filter == KeypointFilter().enabled is False
     assert seen[1].area_weighted is True  # eq. 7 by default
+    assert (seen[1].mode, seen[1].sigma_scale) == ("soft", 1.0)  # soft VQ by default (issue 11, round 7)
     per_vertex = parser.parse_args(["evaluate", str(folder), "--no-area-weighted"])
     with pytest.raises(CommandError):
         per_vertex.func(per_vertex)
@@ -379,5 +384,6 @@ def test_paper_preset_is_the_papers_method(folder: Path, tmp_path: Path) -> None
               "time_range=spectrum")
     for part in wanted:
         assert part in describe.split(";"), (part, describe)
-    # and eq. 8, the sum over vertices, though the default BoF is eq. 7's integral
+    # and eq. 8, the sum over vertices, and hard VQ, though the default BoF is eq. 7's soft integral
     assert result.rows[0].details["encode"]["area_weighted"] is False
+    assert result.rows[0].details["encode"]["mode"] == "hard"

@@ -27,7 +27,7 @@ def test_a_scale_fit_by_area_served_by_count_is_logged(caplog: pytest.LogCapture
 
 
 @pytest.mark.parametrize("metadata", [
-    {"fusion": FUSION, "encode": {"mode": "hard", "keypoints_only": False, "area_weighted": True}},  # agrees
+    {"fusion": FUSION, "encode": EncodeParams().encoding()},  # agrees
     {"fusion": FUSION},  # made before vocabularies recorded their encoding
     {"encode": {"mode": "soft", "keypoints_only": True, "area_weighted": False}},  # no fusion: no scale
 ])
