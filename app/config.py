@@ -47,8 +47,8 @@ class DescribeSettings(BaseModel):
 class EncodeSettings(BaseModel):
     """How a description becomes a BoF vector (SHAPEBAG_ENCODE__MODE=soft ...)."""
 
-    mode: str = EncodeParams.mode
-    sigma_scale: float = EncodeParams.sigma_scale
+    mode: Literal["soft", "hard"] = "soft"  # EncodeParams.mode (tests/test_config.py checks they agree)
+    sigma_scale: float = Field(default=EncodeParams.sigma_scale, gt=0, allow_inf_nan=False)
     keypoints_only: bool = False
     area_weighted: bool = EncodeParams.area_weighted
     fusion: bool = True  # append the scaled Shape-DNA when the vocabulary has fusion scales (app.core.fusion)

@@ -29,3 +29,20 @@ def test_unknown_values_are_refused_at_start(monkeypatch, name):
     monkeypatch.setenv(f"SHAPEBAG_DESCRIBE__{name}", "bogus")
     with pytest.raises(pydantic.ValidationError):
         Settings()
+
+
+def test_encode_defaults_are_the_core_defaults_and_bad_values_are_refused(monkeypatch):
+    from app.core.vocabulary import EncodeParams
+
+    for name in ("MODE", "SIGMA_SCALE", "KEYPOINTS_ONLY", "AREA_WEIGHTED", "FUSION"):
+        monkeypatch.delenv(f"SHAPEBAG_ENCODE__{name}", raising=False)
+    assert Settings().encode.params() == EncodeParams()
+    bad = (("MODE", "fuzzy"), ("SIGMA_SCALE", "0"), ("SIGMA_SCALE", "-1"), ("SIGMA_SCALE", "nan"))
+    for name, value in bad:
+        monkeypatch.setenv(f"SHAPEBAG_ENCODE__{name}", value)
+        with pytest.raises(pydantic.ValidationError, match=name.lower()):
+            Settings()
+        monkeypatch.delenv(f"SHAPEBAG_ENCODE__{name}")
+    monkeypatch.setenv("SHAPEBAG_ENCODE__MODE", "hard")
+    monkeypatch.setenv("SHAPEBAG_ENCODE__SIGMA_SCALE", "0.7")
+    assert (Settings().encode.params().mode, Settings().encode.params().sigma_scale) == ("hard", 0.7)

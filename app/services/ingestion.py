@@ -12,7 +12,7 @@ from app.core.pipeline import describe
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError, QueueFullError
 from app.services.metadata import check_metadata
-from app.services.vocabularies import load_vocabulary
+from app.services.vocabularies import load_vocabulary, version_params
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
 from app.storage import vocabularies as vocab_repo
@@ -112,7 +112,8 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
             active = vocab_repo.active(conn)
         vector = None
         if active is not None:
-            vector = load_vocabulary(ctx, active).encode(description, ctx.settings.encode.params())
+            vocab = load_vocabulary(ctx, active)
+            vector = vocab.encode(description, version_params(ctx, active, vocab))
         timings["encode"] = time.perf_counter() - t
         with ctx.db.write() as conn:
             now_active = vocab_repo.active(conn)

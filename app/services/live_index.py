@@ -10,16 +10,16 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from app.core.pipeline import ShapeDescription
-from app.core.vocabulary import Vocabulary
+from app.core.vocabulary import EncodeParams, Vocabulary
 from app.index import IndexFileError, ShapeIndex, load_index, new_index
 from app.services.context import ServiceContext
 from app.services.errors import NotReadyError
-from app.services.vocabularies import encode_missing, load_vocabulary, reencode_version
+from app.services.vocabularies import encode_missing, load_vocabulary, reencode_version, version_params
 from app.storage import models as models_repo
 from app.storage import vocabularies as vocab_repo
 from app.storage.vocabularies import VocabularyRecord
@@ -33,6 +33,7 @@ class ActivePair:
     vocabulary: Vocabulary
     index: ShapeIndex
     cursor: int  # highest bof.seq of this version already in `index`
+    params: EncodeParams = field(default_factory=EncodeParams)  # how this version encodes (queries too)
     dirty: bool = False
     reconciled: str = ""  # what happened at load: "loaded" | "rebuilt: <why>"
 
@@ -53,7 +54,8 @@ class LiveIndex:
 
     def _load_pair(self, record: VocabularyRecord) -> ActivePair:
         vocab = load_vocabulary(self.ctx, record)
-        dim = vocab.dimension(self.ctx.settings.encode.params())  # v words, + c with Shape-DNA fusion
+        params = version_params(self.ctx, record, vocab)
+        dim = vocab.dimension(params)  # v words, + c with Shape-DNA fusion
         encode_missing(self.ctx, record.id)  # e.g. ready before any vocabulary existed
         with self.ctx.db.read() as conn:
             ids, vectors, cursor = vocab_repo.vectors(conn, record.id)
@@ -80,7 +82,8 @@ class LiveIndex:
             if len(ids):
                 index.add(ids, vectors)
             index.save(path)
-        return ActivePair(record, vocab, index, cursor, reconciled=f"rebuilt: {why}" if why else "loaded")
+        return ActivePair(record, vocab, index, cursor, params,
+                          reconciled=f"rebuilt: {why}" if why else "loaded")
 
     def refresh(self) -> int:
         """Follow the database: swap to a newly active version, add newly encoded models.
@@ -154,7 +157,7 @@ class LiveIndex:
     def encode(self, description: ShapeDescription) -> tuple[int, np.ndarray]:
         """(vocabulary id, (v,) float32 BoF) of a query, with the pair that will answer it."""
         pair = self.require()
-        return pair.record.id, pair.vocabulary.encode(description, self.ctx.settings.encode.params())
+        return pair.record.id, pair.vocabulary.encode(description, pair.params)
 
     def search(
         self,

@@ -8,6 +8,7 @@ import sqlite3
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +35,9 @@ def load_vocabulary(ctx: ServiceContext, record: VocabularyRecord) -> Vocabulary
     with _cache_lock:
         if key not in _cache:
             vocab = Vocabulary.load(ctx.blobs.local_dir(inside_data_dir(ctx, record.path)))
-            _warn_if_encoded_otherwise(vocab, ctx.settings.encode.params(), record.id)
+            params = version_params(ctx, record, vocab)
+            _warn_if_encoded_otherwise(vocab, params, record.id)
+            _warn_if_settings_wait(ctx.settings.encode.params(), params, record.id)
             _cache[key] = vocab
         return _cache[key]
 
@@ -51,6 +54,40 @@ def _warn_if_encoded_otherwise(vocab: Vocabulary, params: EncodeParams, version:
         log.warning("vocabulary version %d's fusion scale was fit with %s; the encode settings say %s: "
                     "rebuild the vocabulary (POST /admin/vocabulary/rebuild) to refit it",
                     version, was, {k: now[k] for k in was})
+
+
+def _warn_if_settings_wait(settings: EncodeParams, version: EncodeParams, version_id: int) -> None:
+    """Say when SHAPEBAG_ENCODE__* ask for another quantisation or weighting than a version encodes with."""
+    now, kept = settings.encoding(), version.encoding()
+    if now != kept:
+        log.warning("vocabulary version %d encodes with %s, the encode settings say %s: they apply from the "
+                    "next vocabulary rebuild (POST /admin/vocabulary/rebuild)", version_id, kept, now)
+
+
+ENCODING_KEYS = ("mode", "sigma_scale", "keypoints_only", "area_weighted")
+
+
+def stored_encoding(record: VocabularyRecord, vocab: Vocabulary) -> dict | None:
+    """How the vectors of version `record` are encoded: as recorded when it was registered or, for a
+    version registered before that was recorded, as its fusion scale was fit (the service's encoding
+    then); None when neither says (a version older than both)."""
+    recorded = record.metadata.get("vectors_encoding")
+    if isinstance(recorded, dict):
+        return recorded
+    fitted = vocab.metadata.get("encode")
+    return fitted if isinstance(fitted, dict) else None
+
+
+def version_params(ctx: ServiceContext, record: VocabularyRecord, vocab: Vocabulary) -> EncodeParams:
+    """EncodeParams for every vector of version `record`, stored or queried: the quantisation and
+    weighting (mode, σ, scope, area) the version was registered with, so that one version never holds
+    vectors made two ways (and its fusion scale stays the one fit for them); the rest (fusion on or
+    off) from this process's settings. New encode settings apply from the next vocabulary rebuild."""
+    params = ctx.settings.encode.params()
+    stored = stored_encoding(record, vocab)
+    if stored is None:
+        return params
+    return replace(params, **{k: stored[k] for k in ENCODING_KEYS if k in stored})
 
 
 def inside_data_dir(ctx: ServiceContext, relative: str) -> Path:
@@ -81,6 +118,7 @@ def register(ctx: ServiceContext, vocab: Vocabulary, activate: bool) -> int:
         vocab.save(directory)
         ctx.blobs.share_dir(directory, conn)  # database blob backend: other hosts load it from there
         vocab_repo.set_path(conn, vid, str(directory.relative_to(ctx.data_dir)))
+        vocab_repo.set_vectors_encoding(conn, vid, ctx.settings.encode.params().encoding())
         if activate:
             vocab_repo.activate(conn, vid)
     return vid
@@ -117,9 +155,8 @@ def load_descriptions(ctx: ServiceContext, model_ids: list[int]) -> tuple[list[i
     return ids, descs
 
 
-def encode_all(ctx: ServiceContext, vocab: Vocabulary, descs: list[ShapeDescription]) -> np.ndarray:
+def encode_all(vocab: Vocabulary, descs: list[ShapeDescription], params: EncodeParams) -> np.ndarray:
     """(n, vocab.dimension(params)) float32 vectors: BoF, or BoF + Shape-DNA when fused."""
-    params = ctx.settings.encode.params()
     if not descs:
         return np.zeros((0, vocab.dimension(params)), np.float32)
     return np.stack([vocab.encode(d, params) for d in descs])
@@ -167,8 +204,9 @@ def rebuild_vocabulary(
     keep_alive()
     t = time.perf_counter()
     vid = register(ctx, vocab, activate=False)
-    vectors = encode_all(ctx, vocab, descs)
-    index = new_index(ctx.settings.index_backend, vocab.dimension(ctx.settings.encode.params()))
+    params = ctx.settings.encode.params()  # what register() recorded as the new version's encoding
+    vectors = encode_all(vocab, descs, params)
+    index = new_index(ctx.settings.index_backend, vocab.dimension(params))
     index.add(np.asarray(ids, np.int64), vectors)
     index.save(ctx.index_path(vid))
     timings["encode_and_index"] = time.perf_counter() - t
@@ -222,7 +260,7 @@ def encode_missing(ctx: ServiceContext, vocabulary_id: int) -> list[int]:
         return []
     vocab = load_vocabulary(ctx, record)
     ids, descs = load_descriptions(ctx, missing)
-    vectors = encode_all(ctx, vocab, descs)
+    vectors = encode_all(vocab, descs, version_params(ctx, record, vocab))
     with ctx.db.write() as conn:
         alive = set(models_repo.get_many(conn, ids))
         for mid, vec in zip(ids, vectors, strict=True):
@@ -256,7 +294,7 @@ def encode_version(
     """Encode `model_ids` from their cached descriptions with version `record` -> ids, (n, dim) vectors."""
     vocab = load_vocabulary(ctx, record)
     ids, descs = load_descriptions(ctx, model_ids)
-    return ids, encode_all(ctx, vocab, descs)
+    return ids, encode_all(vocab, descs, version_params(ctx, record, vocab))
 
 
 def store_vectors(conn: sqlite3.Connection, vocabulary_id: int, ids: list[int], vectors: np.ndarray) -> None:
@@ -269,7 +307,7 @@ def store_vectors(conn: sqlite3.Connection, vocabulary_id: int, ids: list[int], 
 
 def reencode_version(ctx: ServiceContext, record: VocabularyRecord) -> int:
     """Re-encode every ready model with version `record` (its stored vectors were encoded under
-    other settings, e.g. SHAPEBAG_ENCODE__FUSION flipped); returns how many."""
+    other settings: SHAPEBAG_ENCODE__FUSION flipped); returns how many."""
     with ctx.db.read() as conn:
         ids = models_repo.ready_ids(conn)
     ids, vectors = encode_version(ctx, record, ids)

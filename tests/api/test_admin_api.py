@@ -117,24 +117,36 @@ def test_restart_reconciles_a_missing_or_corrupt_index(data_dir):
     assert index_file.stat().st_size > 100  # rewritten
 
 
-def test_index_rebuild_reencodes_every_model_with_the_current_encode_settings(data_dir):
+def test_new_encode_settings_apply_from_the_next_vocabulary_rebuild(data_dir):
+    """A version keeps the encoding it was registered with (its vectors and its fusion scale agree): an
+    index rebuild under other settings re-encodes the same way; a vocabulary rebuild fits a new
+    version, encoded as the settings now say."""
     from app.config import EncodeSettings
 
     settings = make_settings(data_dir, encode=EncodeSettings(mode="hard"))  # the seed was encoded "soft"
     ctx = open_context(settings)
     with ctx.db.read() as conn:
-        vid = vocab_repo.active(conn).id
-        soft_ids, soft, _ = vocab_repo.vectors(conn, vid)
+        old = vocab_repo.active(conn).id
+        soft_ids, soft, _ = vocab_repo.vectors(conn, old)
     with TestClient(create_app(settings)) as client:
         models = client.get("/models", params={"limit": 100}).json()["data"]
         before = _answers(client, models)
+        assert all(hits[0][1] > 0 for hits in before)  # different shapes never coincide
         job = client.post("/admin/index/rebuild", headers=TOKEN).json()
         done = wait_job(client, job["job_id"])
         assert done["state"] == "done" and done["result"]["models"] == len(models)
+        with ctx.db.read() as conn:
+            again_ids, again, _ = vocab_repo.vectors(conn, old)
+        np.testing.assert_allclose(again[np.argsort(again_ids)], soft[np.argsort(soft_ids)], atol=1e-6)
+        assert _answers(client, models) == before
+        job = client.post("/admin/vocabulary/rebuild", headers=TOKEN, json={"size": TEST_WORDS}).json()
+        assert wait_job(client, job["job_id"])["state"] == "done"
         wait_for(lambda: _answers(client, models) != before, timeout_s=20)  # the live index follows
-    assert all(hits[0][1] > 0 for hits in before)  # soft BoFs of different shapes never coincide
     with ctx.db.read() as conn:
-        hard_ids, hard, _ = vocab_repo.vectors(conn, vid)
+        new = vocab_repo.active(conn)
+        hard_ids, hard, _ = vocab_repo.vectors(conn, new.id)
+    assert new.id != old and new.metadata["vectors_encoding"]["mode"] == "hard"
     assert sorted(soft_ids) == sorted(hard_ids)
     hard, soft = hard[np.argsort(hard_ids)], soft[np.argsort(soft_ids)]  # rows come in seq order: align by id
-    assert ((soft > 0).sum(axis=1) > (hard > 0).sum(axis=1)).all()  # soft VQ spreads weight over more words
+    words = TEST_WORDS
+    assert ((soft[:, :words] > 0).sum(axis=1) > (hard[:, :words] > 0).sum(axis=1)).all()  # hard: fewer words

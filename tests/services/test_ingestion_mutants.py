@@ -230,6 +230,7 @@ def _fakes(ctx, monkeypatch):
     class Vocab:
         def __init__(self, record):
             self.record = record
+            self.metadata: dict = {}  # no fit encoding: the version's record (or the settings) decide
 
         def encode(self, description, params):
             seen.encode.append((self.record.id, type(description), params))

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
+from app.core.pipeline import ShapeDescription
 from app.core.vocabulary import Vocabulary
 from app.index import new_index
 from app.services import ingestion
@@ -130,6 +133,78 @@ def test_flipping_fusion_re_encodes_the_stored_vectors_on_load(data_dir):
     fresh = LiveIndex(ctx)  # and back: fused again
     fresh.refresh()
     assert fresh.pair.index.dim == pair.index.dim
+
+
+def test_a_version_keeps_the_encoding_it_was_registered_with(data_dir, caplog):
+    """Hard and soft BoFs have the same length: a version records its encoding when it is registered,
+    and every vector of it (stored, re-encoded or queried) is made that way whatever SHAPEBAG_ENCODE__MODE
+    a process starts with, so soft queries never meet hard vectors; new settings apply from the next
+    vocabulary rebuild, and the service says so."""
+    from app.config import EncodeSettings
+
+    soft_ctx = open_context(make_settings(data_dir))
+    soft = LiveIndex(soft_ctx)
+    soft.refresh()
+    vid = soft.pair.record.id
+    with soft_ctx.db.read() as conn:
+        assert vocab_repo.get(conn, vid).metadata["vectors_encoding"]["mode"] == "soft"
+        ids, stored, _ = vocab_repo.vectors(conn, vid)
+    soft.save()
+    vocab_service._cache.clear()  # a fresh process
+    hard_ctx = open_context(make_settings(data_dir, encode=EncodeSettings(mode="hard")))
+    hard = LiveIndex(hard_ctx)
+    with caplog.at_level("WARNING", logger="app.services.vocabularies"):
+        hard.refresh()
+    assert hard.pair.params.mode == "soft" and hard.pair.reconciled == "loaded"
+    assert any("apply from the next vocabulary rebuild" in r.getMessage() for r in caplog.records)
+    # a model described again and encoded by the hard-configured process lands on its stored vector
+    description = ShapeDescription.load(hard_ctx.blobs.description_path(int(ids[0])))
+    got_vid, vector = hard.encode(description)
+    assert got_vid == vid and np.allclose(vector, stored[0], atol=1e-6)
+    dist, got, _ = hard.search(vector, 1)
+    assert got[0] == ids[0] and dist[0] == pytest.approx(0.0, abs=1e-5)
+    # re-encoding (the admin index rebuild) keeps the version's encoding too
+    assert vocab_service.reencode_version(hard_ctx, hard.pair.record) == len(ids)
+    with hard_ctx.db.read() as conn:
+        _, again, _ = vocab_repo.vectors(conn, vid)
+    np.testing.assert_allclose(again[np.argsort(ids)], stored[np.argsort(ids)], atol=1e-6)
+
+
+def test_a_worker_with_other_settings_ingests_with_the_version_s_encoding(data_dir, corpus):
+    from app.config import EncodeSettings
+    from app.core.vocabulary import EncodeParams
+
+    ctx = open_context(make_settings(data_dir, encode=EncodeSettings(mode="hard")))
+    path, label = corpus.held_out[0]
+    model_id = ingestion.submit(ctx, path.read_bytes(), path.name, name="late", label=label).model.id
+    Worker(ctx, "hard-configured").run_forever(exit_when_idle=True)
+    with ctx.db.read() as conn:
+        record = vocab_repo.active(conn)
+        stored = vocab_repo.vector_of(conn, model_id, record.id)
+    vocab = vocab_service.load_vocabulary(ctx, record)
+    description = ShapeDescription.load(ctx.blobs.description_path(model_id))
+    assert np.allclose(stored, vocab.encode(description, EncodeParams(mode="soft")), atol=1e-6)
+    assert not np.allclose(stored, vocab.encode(description, EncodeParams(mode="hard")), atol=1e-3)
+
+
+def test_a_version_without_a_record_encodes_as_its_fusion_scale_was_fit(data_dir):
+    """Data directories from before versions recorded their encoding: the vocabulary's fit encoding
+    (the service's when it was registered) stands in; a version older than both follows the settings."""
+    from app.config import EncodeSettings
+
+    ctx = open_context(make_settings(data_dir, encode=EncodeSettings(mode="hard")))
+    with ctx.db.write() as conn:  # as an older release left it: no "vectors_encoding"
+        record = vocab_repo.active(conn)
+        meta = {k: v for k, v in record.metadata.items() if k != "vectors_encoding"}
+        conn.execute("UPDATE vocabularies SET metadata = ? WHERE id = ?", (json.dumps(meta), record.id))
+        record = vocab_repo.active(conn)
+    vocab = vocab_service.load_vocabulary(ctx, record)
+    assert vocab.metadata["encode"]["mode"] == "soft"  # the seed's vocabulary was fit with soft BoFs
+    assert vocab_service.stored_encoding(record, vocab) == vocab.metadata["encode"]
+    assert vocab_service.version_params(ctx, record, vocab).mode == "soft"
+    older = Vocabulary(vocab.centers, run=vocab.run, sigma=vocab.sigma)  # no "encode" either
+    assert vocab_service.stored_encoding(record, older) is None
+    assert vocab_service.version_params(ctx, record, older).mode == "hard"
 
 
 def test_similar_racing_a_swap_reads_the_vector_again(data_dir, monkeypatch):

@@ -39,8 +39,7 @@ async def _stored(runtime: Runtime, pair: ActivePair, model_id: int) -> explain.
     path = str(ctx.blobs.mesh_path(model.sha256, model.file_type))
     args = (path, model.file_type, ctx.settings.describe.params(), ctx.settings.max_vertices)
     geometry = await runtime.describer.run(explain.stored_geometry, args, "reading the model's mesh")
-    encode = ctx.settings.encode.params()
-    return explain.side(model, model.name, description, geometry, pair.vocabulary, encode)
+    return explain.side(model, model.name, description, geometry, pair.vocabulary, pair.params)
 
 
 @router.get("/models/{model_id}/explain", response_model=Explanation, responses={**ERRORS, 409: ERRORS[404]})
@@ -75,7 +74,7 @@ async def explain_upload(request: Request, runtime: RuntimeDep) -> Explanation:
     other = await _stored(runtime, pair, against)  # first: a wrong id fails before the costly part
     args = (data, limits.upload_format(filename), settings.describe.params(), settings.max_vertices)
     description, geometry = await runtime.describer.run(explain.query_geometry, args, "explaining the query")
-    shape = explain.side(None, filename, description, geometry, pair.vocabulary, settings.encode.params())
+    shape = explain.side(None, filename, description, geometry, pair.vocabulary, pair.params)
     return to_response(explain.explain(pair.record.id, pair.vocabulary, shape, other))
 
 
