@@ -309,8 +309,14 @@ def reencode_version(ctx: ServiceContext, record: VocabularyRecord) -> int:
     """Re-encode every ready model with version `record` (its stored vectors were encoded under
     other settings: SHAPEBAG_ENCODE__FUSION flipped); returns how many."""
     with ctx.db.read() as conn:
-        ids = models_repo.ready_ids(conn)
-    ids, vectors = encode_version(ctx, record, ids)
+        ready = models_repo.ready_ids(conn)
+    ids, vectors = encode_version(ctx, record, ready)
+    lost = sorted(set(ready) - set(ids))  # no cached description: cannot be encoded again
     with ctx.db.write() as conn:
         store_vectors(conn, record.id, ids, vectors)
+        for mid in lost:  # an old vector of another length beside the new ones would break the index
+            vocab_repo.delete_vector(conn, mid, record.id)
+    if lost:
+        log.warning("%d model(s) without a cached description leave version %d's index until ingested "
+                    "again: %s", len(lost), record.id, ", ".join(map(str, lost[:10])))
     return len(ids)

@@ -101,6 +101,11 @@ def put_vector(conn: sqlite3.Connection, model_id: int, vocabulary_id: int, vect
     )
 
 
+def delete_vector(conn: sqlite3.Connection, model_id: int, vocabulary_id: int) -> None:
+    """Drop one model's BoF for one version (the model stays; it has no vector there until encoded)."""
+    conn.execute("DELETE FROM bof WHERE model_id = ? AND vocabulary_id = ?", (model_id, vocabulary_id))
+
+
 def vectors(
     conn: sqlite3.Connection, vocabulary_id: int, after_seq: int = 0
 ) -> tuple[np.ndarray, np.ndarray, int]:

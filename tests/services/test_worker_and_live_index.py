@@ -207,6 +207,24 @@ def test_a_version_without_a_record_encodes_as_its_fusion_scale_was_fit(data_dir
     assert vocab_service.version_params(ctx, record, older).mode == "hard"
 
 
+def test_flipping_fusion_with_a_description_missing_drops_that_model_s_old_vector(data_dir, caplog):
+    """A model whose cached description is gone cannot be re-encoded; its old vector (another length)
+    must not stay beside the new ones, or no index could be built from them."""
+    from app.config import EncodeSettings
+
+    ctx = open_context(make_settings(data_dir))
+    with ctx.db.read() as conn:
+        ids = models_repo.ready_ids(conn)
+    ctx.blobs.description_path(ids[0]).unlink()
+    plain = LiveIndex(open_context(make_settings(data_dir, encode=EncodeSettings(fusion=False))))
+    with caplog.at_level("WARNING", logger="app.services.vocabularies"):
+        plain.refresh()
+    assert plain.pair.index.dim == plain.pair.vocabulary.size
+    assert sorted(plain.pair.index.ids().tolist()) == sorted(ids[1:])
+    assert any(f"without a cached description leave version {plain.pair.record.id}" in r.getMessage()
+               and str(ids[0]) in r.getMessage() for r in caplog.records)
+
+
 def test_similar_racing_a_swap_reads_the_vector_again(data_dir, monkeypatch):
     from app.services import search
 
