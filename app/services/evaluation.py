@@ -246,9 +246,30 @@ def _bof_lines(
     # one vocabulary, no seed; a fused row only at the weight of the vocabulary's own scales (what the
     # service serves with it)
     if frozen is not None and (row.fusion is None or _fused_at(frozen, row.fusion)):
+        _check_frozen_encoding(frozen, row, params, options)
         name = f"{row.name} [frozen {Path(options.vocabulary or '').name}]"
         lines.insert(1, _score_bof(name, row, frozen, db, db, labels, params, time.perf_counter(), lines[0]))
     return lines
+
+
+def _check_frozen_encoding(
+    vocab: Vocabulary, row: Row, params: EncodeParams, options: EvaluationOptions
+) -> None:
+    """A frozen fused line uses the vocabulary's BoF scale, fit on BoFs encoded one way: scoring BoFs
+    encoded another way would weigh its two parts off and give a figure nobody serves."""
+    fitted = vocab.metadata.get("encode")
+    if row.fusion is None or not isinstance(fitted, dict):
+        return
+    now = params.encoding()
+    differ = {k: fitted[k] for k in now if k in fitted and fitted[k] != now[k]}
+    if differ:
+        flags = " ".join(f"--{k.replace('_', '-')} {v}" for k, v in differ.items()
+                         if k in ("mode", "sigma_scale"))
+        raise EvaluationError(
+            f"the vocabulary at {options.vocabulary} has a fusion scale fit with {differ}, row {row.name} "
+            f"encodes with {({k: now[k] for k in differ})}: evaluate with its encoding "
+            f"({flags or 'the same encode flags'}) or refit the vocabulary"
+        )
 
 
 def _fused_at(vocab: Vocabulary, weight: float) -> bool:

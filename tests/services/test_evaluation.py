@@ -153,6 +153,18 @@ def test_a_fused_row_is_scored_with_the_frozen_words_and_their_scales(folder: Pa
     bare = evaluate(folder, _options(cache, rows=("run5",), vocabulary_size=4, fusion=(1.0,),
                                      vocabulary=words.save(tmp_path / "bare")))
     assert [r.name for r in bare.rows] == ["run5", "run5 [frozen bare]", "run5 + 1 DNA"]
+    # scales fit on hard BoFs are not used to score soft ones (nor the other way round): refused, saying how
+    meta = {**words.metadata, "fusion": {"bof": 1.0, "dna": 1.0, "weight": 1.0, "count": 10},
+            "encode": {"mode": "hard", "keypoints_only": False, "area_weighted": True}}
+    hard_fit = Vocabulary(words.centers, run="run5", sigma=words.sigma, metadata=meta).save(tmp_path / "hard")
+    with pytest.raises(EvaluationError, match=r"fit with \{'mode': 'hard'\}.*--mode hard"):
+        evaluate(folder, _options(cache, rows=("run5",), vocabulary_size=4, fusion=(1.0,),
+                                  vocabulary=hard_fit))
+    served = evaluate(folder, _options(cache, rows=("run5",), vocabulary_size=4, fusion=(1.0,),
+                                       vocabulary=hard_fit, mode="hard"))
+    assert served.rows[-1].name == "run5 + 1 DNA [frozen hard]"
+    pure = evaluate(folder, _options(cache, rows=("run5",), vocabulary_size=4, vocabulary=hard_fit))
+    assert [r.name for r in pure.rows] == ["run5", "run5 [frozen hard]"]  # no scale used: no objection
 
 
 def test_frozen_vocabulary_of_another_run_is_refused(folder: Path, tmp_path: Path) -> None:
