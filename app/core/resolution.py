@@ -73,8 +73,13 @@ AREA_LOSS_MAX = 0.05
 # few % fewer vertices): go straight to clustering.
 STALLED = 3.0
 # Above PRECLUSTER_ABOVE x target, cluster to PRECLUSTER_TO x target first: edge collapse costs
-# ~13 us and ~450 B per vertex (2.2M vertices: 37 s, +0.9 GB), clustering a fraction of that.
-PRECLUSTER_ABOVE = 60
+# ~13 us and ~450 B per vertex (2.2M vertices: 37 s, +0.9 GB), clustering a fraction of that. But
+# clustering leaves a surface whose pieces meet at single vertices, and edge collapse then tears it
+# apart: a smooth 164k-vertex sphere came out in 37 pieces at the old 60x (one watertight piece by
+# edge collapse alone, 0.49 s), and the realworld turbine blade (99.5k vertices) lost its
+# self-retrieval (a re-triangulated copy ranked it 94th of 106; 1st without the clustering). So only
+# inputs edge collapse cannot afford go through it: 500x (500k vertices: ~3-5 s, ~225 MB).
+PRECLUSTER_ABOVE = 500
 PRECLUSTER_TO = 30
 
 

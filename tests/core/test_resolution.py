@@ -208,3 +208,16 @@ def test_a_plate_of_many_small_parts_keeps_every_part():
     assert face_components(out.faces, out.n_vertices).max() + 1 == 100
     assert out.area() > 0.85 * mesh.area()  # an inscribed 10-vertex polyhedron keeps ~0.9 of a sphere
     assert_clean_and_solvable(out)
+
+
+def test_a_fine_smooth_surface_comes_out_as_one_watertight_piece():
+    """164k vertices (under PRECLUSTER_ABOVE x 1000) go straight to edge collapse: vertex clustering
+    first left this sphere in 37 pieces meeting at single vertices, which the eigen-solve reads as
+    separate shapes."""
+    sphere = trimesh.creation.icosphere(subdivisions=7)  # 163,842 vertices
+    fine = Mesh(np.asarray(sphere.vertices, float), np.asarray(sphere.faces, np.int64))
+    out = resolution.to_resolution(fine, 1000)
+    surface = trimesh.Trimesh(out.vertices, out.faces, process=False)
+    assert 1000 / 1.5 <= out.n_vertices <= 1000 * 1.5
+    assert len(surface.split(only_watertight=False)) == 1 and surface.is_watertight
+    assert abs(surface.area / sphere.area - 1.0) < 0.02

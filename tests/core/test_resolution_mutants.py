@@ -175,8 +175,8 @@ def test_simplify_says_why_when_even_clustering_leaves_nothing_usable(monkeypatc
     )
 
 
-@pytest.mark.parametrize(("n", "preclustered"), [(6000, False), (6001, True)])
-def test_only_inputs_above_60_times_the_target_are_clustered_first(monkeypatch, n, preclustered):
+@pytest.mark.parametrize(("n", "preclustered"), [(50000, False), (50001, True)])
+def test_only_inputs_above_500_times_the_target_are_clustered_first(monkeypatch, n, preclustered):
     calls, clusters = scripted_simplify(monkeypatch, [fake(105)], clustered=fake(3000))
     resolution.simplify(fake(n), 100)
     assert clusters == ([resolution.PRECLUSTER_TO * 100] if preclustered else [])
