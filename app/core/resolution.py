@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from app.core.cleaning import nonmanifold_faces
 from app.core.decimation import cluster, face_normals, quadric
 from app.core.mesh import InvalidMeshError, Mesh, clean
 
@@ -99,13 +100,14 @@ def simplify(mesh: Mesh, target_vertices: int, tolerance: float = 1.5) -> Mesh:
     work: Mesh | None
     try:
         if unit.n_vertices > PRECLUSTER_ABOVE * target_vertices:
-            unit = clean(cluster(unit, PRECLUSTER_TO * target_vertices))
+            unit = _unfolded(clean(cluster(unit, PRECLUSTER_TO * target_vertices)))
         work = _collapse(unit, target_vertices)
     except InvalidMeshError:  # cleaning refused what edge collapse left (pieces, slivers)
         work = None
     if work is None or work.n_vertices > tolerance * target_vertices:
         try:
-            work = clean(cluster(unit, target_vertices))  # last resort: any topology, always reduces
+            # last resort: any topology, always reduces
+            work = _unfolded(clean(cluster(unit, target_vertices)))
         except InvalidMeshError as exc:
             why = f"the mesh could not be simplified to about {target_vertices} vertices: {exc}"
             raise InvalidMeshError(why) from exc
@@ -115,6 +117,20 @@ def simplify(mesh: Mesh, target_vertices: int, tolerance: float = 1.5) -> Mesh:
             f"{work.n_vertices}): neither edge collapse nor vertex clustering got there"
         )
     return Mesh(work.vertices * size + centre, work.faces)
+
+
+def _unfolded(mesh: Mesh) -> Mesh:
+    """A clustered mesh without the faces on edges shared by more than two faces (where clustering
+    folded the surface onto itself). Edge collapse tears the surface apart at such edges: a smooth
+    164k-vertex sphere clustered to 30k and collapsed to 1k came out in 37 pieces, in one without
+    them (small holes instead: area 0.999). Unchanged when nothing is folded, or nothing would be left."""
+    folded = nonmanifold_faces(mesh.faces)
+    if not folded.any() or folded.all():
+        return mesh
+    try:
+        return clean(Mesh(mesh.vertices, mesh.faces[~folded]))
+    except InvalidMeshError:  # too little left: keep the folds
+        return mesh
 
 
 def _collapse(mesh: Mesh, target_vertices: int) -> Mesh:

@@ -221,3 +221,32 @@ def test_a_fine_smooth_surface_comes_out_as_one_watertight_piece():
     assert 1000 / 1.5 <= out.n_vertices <= 1000 * 1.5
     assert len(surface.split(only_watertight=False)) == 1 and surface.is_watertight
     assert abs(surface.area / sphere.area - 1.0) < 0.02
+
+
+def test_the_clustering_pre_pass_leaves_no_fold_for_edge_collapse_to_tear(monkeypatch):
+    """Inputs above PRECLUSTER_ABOVE x target are clustered first; the faces where clustering folded the
+    surface onto itself (edges of 3+ faces) go, so edge collapse keeps the surface in one piece (with
+    them, this sphere came out in 37)."""
+    monkeypatch.setattr(resolution, "PRECLUSTER_ABOVE", 100)  # 164k vertices take the 500k+ path
+    sphere = trimesh.creation.icosphere(subdivisions=7)
+    fine = Mesh(np.asarray(sphere.vertices, float), np.asarray(sphere.faces, np.int64))
+    out = resolution.to_resolution(fine, 1000)
+    surface = trimesh.Trimesh(out.vertices, out.faces, process=False)
+    assert len(surface.split(only_watertight=False)) == 1
+    assert abs(surface.area / sphere.area - 1.0) < 0.02
+
+
+def test_unfolded_drops_only_the_faces_on_edges_of_three_or_more():
+    ball = trimesh.creation.icosphere(subdivisions=1)  # 42 vertices, 80 faces, closed
+    v, f = np.asarray(ball.vertices, float), np.asarray(ball.faces, np.int64)
+    a, b = int(f[0, 0]), int(f[0, 1])
+    fin = np.vstack([f, [[a, b, len(v)]]])  # a fin hinged on the edge (a, b): three faces share it
+    out = resolution._unfolded(Mesh(np.vstack([v, [[2.0, 2.0, 2.0]]]), fin))
+    assert len(out.faces) == 78  # the fin and the sphere's two faces on that edge, nothing else
+    kept = {tuple(sorted(map(tuple, out.vertices[face].round(9)))) for face in out.faces}
+    lost = {tuple(sorted(map(tuple, v[face].round(9)))) for face in f} - kept
+    assert len(lost) == 2 and all(
+        {tuple(v[a].round(9)), tuple(v[b].round(9))} <= set(face) for face in lost
+    )
+    sphere = Mesh(v, f)
+    assert resolution._unfolded(sphere) is sphere  # nothing folded: unchanged
