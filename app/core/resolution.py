@@ -82,6 +82,8 @@ STALLED = 3.0
 # inputs edge collapse cannot afford go through it: 500x (500k vertices: ~3-5 s, ~225 MB).
 PRECLUSTER_ABOVE = 500
 PRECLUSTER_TO = 30
+# When edge collapse stalls, cluster to REGRID_TO x target (folds dropped) and collapse again (_regrid).
+REGRID_TO = 3
 
 
 def simplify(mesh: Mesh, target_vertices: int, tolerance: float = 1.5) -> Mesh:
@@ -105,6 +107,8 @@ def simplify(mesh: Mesh, target_vertices: int, tolerance: float = 1.5) -> Mesh:
     except InvalidMeshError:  # cleaning refused what edge collapse left (pieces, slivers)
         work = None
     if work is None or work.n_vertices > tolerance * target_vertices:
+        work = _regrid(unit, target_vertices)  # edge collapse stalled: regrid, then collapse again
+    if work is None or work.n_vertices > tolerance * target_vertices:
         try:
             # last resort: any topology, always reduces (folds kept: at the target's own resolution,
             # dropping them opened holes that cost more than the tears; realworld self-retrieval
@@ -121,11 +125,24 @@ def simplify(mesh: Mesh, target_vertices: int, tolerance: float = 1.5) -> Mesh:
     return Mesh(work.vertices * size + centre, work.faces)
 
 
+def _regrid(unit: Mesh, target_vertices: int) -> Mesh | None:
+    """When edge collapse stalls (CAD: fans of slivers, non-manifold seams): cluster to REGRID_TO x the
+    target, drop the folds there (small holes at that resolution), and edge-collapse to the target from
+    that regular grid. None when that fails too (then clustering straight to the target). On the
+    realworld corpus, re-triangulated copies found themselves more often than with direct clustering
+    (NN 0.472 -> 0.500, top 5 0.651 -> 0.689; 28 of 106 copies stall)."""
+    try:
+        return _collapse(_unfolded(clean(cluster(unit, REGRID_TO * target_vertices))), target_vertices)
+    except InvalidMeshError:
+        return None
+
+
 def _unfolded(mesh: Mesh) -> Mesh:
-    """The pre-pass's clustered mesh without the faces on edges shared by more than two faces (where
-    clustering folded the surface onto itself). Edge collapse tears the surface apart at such edges: a
-    smooth 164k-vertex sphere clustered to 30k and collapsed to 1k came out in 37 pieces, in one without
-    them (small holes instead: area 0.999). Unchanged when nothing is folded, or nothing would be left."""
+    """A clustered mesh (the pre-pass's, or the regrid's) without the faces on edges shared by more
+    than two faces (where clustering folded the surface onto itself). Edge collapse tears the surface
+    apart at such edges: a smooth 164k-vertex sphere clustered to 30k and collapsed to 1k came out in
+    37 pieces, in one without them (small holes instead: area 0.999). Unchanged when nothing is
+    folded, or nothing would be left."""
     folded = nonmanifold_faces(mesh.faces)
     if not folded.any() or folded.all():
         return mesh

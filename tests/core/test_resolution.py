@@ -124,7 +124,9 @@ def test_a_stalled_edge_collapse_falls_back_to_clustering(monkeypatch):
     monkeypatch.setattr(resolution, "quadric", stalled)
     mesh = holed_sphere()
     out = simplify(mesh, TARGET)
-    assert calls == [resolution.QUADRIC_RUNGS[0]]  # a first pass that gains nothing: stalled
+    # a first pass that gains nothing: stalled; the regrid's passes gain nothing either; clustering
+    # straight to the target is what is left
+    assert calls[0] == resolution.QUADRIC_RUNGS[0] and set(calls) <= set(resolution.QUADRIC_RUNGS)
     assert in_band(out), out.n_vertices
     assert np.abs(np.linalg.norm(out.vertices, axis=1) - 1.0).max() < 0.05
     assert out.area() == pytest.approx(mesh.area(), rel=0.05)

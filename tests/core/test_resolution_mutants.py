@@ -125,6 +125,7 @@ def scripted_simplify(monkeypatch, quadric_steps, clustered):
         return clustered
 
     monkeypatch.setattr(resolution, "cluster", cluster)
+    monkeypatch.setattr(resolution, "_regrid", lambda unit, target: None)  # its own tests below
     return calls, clusters
 
 
@@ -248,3 +249,40 @@ def test_an_unknown_subdivision_is_refused_with_the_known_ones():
     with pytest.raises(ValueError) as info:
         resolution.to_resolution(_icosahedron(), 100, subdivision="butterfly")
     assert str(info.value) == "subdivision must be one of midpoint, loop, not 'butterfly'"
+
+
+@pytest.mark.parametrize(("regridded", "direct"), [(150, False), (151, True), (None, True)])
+def test_a_stalled_collapse_is_regridded_before_clustering_straight_to_the_target(
+    monkeypatch, regridded, direct
+):
+    calls, clusters = scripted_simplify(monkeypatch, [fake(400)], clustered=fake(100))
+    tried: list[int] = []
+
+    def regrid(unit, target):
+        tried.append(target)
+        return None if regridded is None else fake(regridded)
+
+    monkeypatch.setattr(resolution, "_regrid", regrid)
+    out = resolution.simplify(fake(1000), 100)
+    assert tried == [100]  # 400 > 1.5 x 100: stalled, so the regrid is tried first
+    assert clusters == ([100] if direct else [])  # and direct clustering only if it is not in the band
+    assert out.n_vertices == (100 if direct else regridded)
+
+
+def test_regrid_clusters_to_three_times_the_target_unfolds_and_collapses(monkeypatch):
+    seen: list[tuple] = []
+    grid, unfolded, collapsed = fake(300), fake(290), fake(100)
+    monkeypatch.setattr(resolution, "clean", lambda mesh: mesh)
+    monkeypatch.setattr(resolution, "cluster", lambda mesh, n: seen.append(("cluster", n)) or grid)
+    monkeypatch.setattr(resolution, "_unfolded", lambda mesh: seen.append(("unfold", mesh)) or unfolded)
+    monkeypatch.setattr(resolution, "_collapse",
+                        lambda mesh, n: seen.append(("collapse", mesh, n)) or collapsed)
+    assert resolution._regrid(fake(5000), 100) is collapsed
+    assert seen == [("cluster", resolution.REGRID_TO * 100), ("unfold", grid), ("collapse", unfolded, 100)]
+    assert resolution.REGRID_TO == 3
+
+    def refuse(mesh, n):
+        raise InvalidMeshError("nothing left")
+
+    monkeypatch.setattr(resolution, "_collapse", refuse)
+    assert resolution._regrid(fake(5000), 100) is None
