@@ -286,3 +286,9 @@ def test_regrid_clusters_to_three_times_the_target_unfolds_and_collapses(monkeyp
 
     monkeypatch.setattr(resolution, "_collapse", refuse)
     assert resolution._regrid(fake(5000), 100) is None
+
+    # a regrid that loses more than AREA_LOSS_MAX of the area (its holes too large) is not used
+    for area, used in ((1.0 - resolution.AREA_LOSS_MAX, True), (0.94, False)):
+        shrunk = fake(100, area=area)
+        monkeypatch.setattr(resolution, "_collapse", lambda mesh, n, shrunk=shrunk: shrunk)
+        assert (resolution._regrid(fake(5000), 100) is shrunk) is used
