@@ -129,9 +129,9 @@ def _regrid(unit: Mesh, target_vertices: int) -> Mesh | None:
     """When edge collapse stalls (CAD: fans of slivers, non-manifold seams): cluster to REGRID_TO x the
     target, drop the folds there (small holes at that resolution), and edge-collapse to the target from
     that regular grid. None when that fails too, or loses more than AREA_LOSS_MAX of the area (then
-    clustering straight to the target). On the
-    realworld corpus, re-triangulated copies found themselves more often than with direct clustering
-    (NN 0.472 -> 0.500, top 5 0.651 -> 0.689; 28 of 106 copies stall)."""
+    clustering straight to the target). On the realworld corpus, re-triangulated copies found
+    themselves more often than with direct clustering (NN 0.472 -> 0.500, top 5 0.651 -> 0.708; 28 of
+    106 copies stall: docs/results.md round 7)."""
     try:
         out = _collapse(_unfolded(clean(cluster(unit, REGRID_TO * target_vertices))), target_vertices)
     except InvalidMeshError:

@@ -26,6 +26,9 @@ from app.core.spectrum import first_nonzero
 VOCABULARY_FORMAT = 1
 
 
+ENCODING_FIELDS = ("mode", "sigma_scale", "keypoints_only", "area_weighted")  # what encoding() may record
+
+
 @dataclass(frozen=True)
 class EncodeParams:
     """How a description becomes a BoF vector.
@@ -61,6 +64,11 @@ class EncodeParams:
             encoded["sigma_scale"] = self.sigma_scale
         return encoded
 
+    def with_encoding(self, encoded: dict) -> EncodeParams:
+        """These params with the settings a recorded encoding() names (the others kept)."""
+        return replace(self, **{k: encoded[k] for k in ENCODING_FIELDS if k in encoded})
+
+
 
 @dataclass(frozen=True)
 class Vocabulary:
@@ -90,6 +98,15 @@ class Vocabulary:
         """Length of the vectors encode() gives under `params`: v, or v + c when fused (index size)."""
         scales = self.fusion
         return self.size + (scales.count if scales is not None and self.fused(params) else 0)
+
+    def fusion_encoding_changes(self, params: EncodeParams) -> dict:
+        """{setting: (fit, now)} where `params` encode otherwise than the BoFs the fusion scale was fit
+        on ({} without fusion scales or a recorded encoding: nothing to compare)."""
+        fitted = self.metadata.get("encode")
+        if self.fusion is None or not isinstance(fitted, dict):
+            return {}
+        now = params.encoding()
+        return {k: (fitted[k], now[k]) for k in now if k in fitted and fitted[k] != now[k]}
 
     def with_fusion(
         self, descriptions: Sequence[ShapeDescription], params: EncodeParams | None = None,

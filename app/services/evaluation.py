@@ -257,17 +257,14 @@ def _check_frozen_encoding(
 ) -> None:
     """A frozen fused line uses the vocabulary's BoF scale, fit on BoFs encoded one way: scoring BoFs
     encoded another way would weigh its two parts off and give a figure nobody serves."""
-    fitted = vocab.metadata.get("encode")
-    if row.fusion is None or not isinstance(fitted, dict):
-        return
-    now = params.encoding()
-    differ = {k: fitted[k] for k in now if k in fitted and fitted[k] != now[k]}
-    if differ:
-        flags = " ".join(f"--{k.replace('_', '-')} {v}" for k, v in differ.items()
+    changes = vocab.fusion_encoding_changes(params) if row.fusion is not None else {}
+    if changes:
+        flags = " ".join(f"--{k.replace('_', '-')} {fit}" for k, (fit, _) in changes.items()
                          if k in ("mode", "sigma_scale"))
         raise EvaluationError(
-            f"the vocabulary at {options.vocabulary} has a fusion scale fit with {differ}, row {row.name} "
-            f"encodes with {({k: now[k] for k in differ})}: evaluate with its encoding "
+            f"the vocabulary at {options.vocabulary} has a fusion scale fit with "
+            f"{ {k: fit for k, (fit, _) in changes.items()} }, row {row.name} encodes with "
+            f"{ {k: now for k, (_, now) in changes.items()} }: evaluate with its encoding "
             f"({flags or 'the same encode flags'}) or refit the vocabulary"
         )
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,7 +33,7 @@ class ActivePair:
     vocabulary: Vocabulary
     index: ShapeIndex
     cursor: int  # highest bof.seq of this version already in `index`
-    params: EncodeParams = field(default_factory=EncodeParams)  # how this version encodes (queries too)
+    params: EncodeParams  # how this version encodes its vectors and the queries (version_params)
     dirty: bool = False
     reconciled: str = ""  # what happened at load: "loaded" | "rebuilt: <why>"
 

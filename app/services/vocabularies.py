@@ -8,7 +8,6 @@ import sqlite3
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -45,15 +44,11 @@ def load_vocabulary(ctx: ServiceContext, record: VocabularyRecord) -> Vocabulary
 def _warn_if_encoded_otherwise(vocab: Vocabulary, params: EncodeParams, version: int) -> None:
     """The fusion BoF scale was fit on BoFs encoded one way; other encode settings still rank, but the
     BoF and Shape-DNA parts are then weighted a little off (area vs count: ~4 % on the shipped one)."""
-    fitted = vocab.metadata.get("encode")
-    if vocab.fusion is None or not isinstance(fitted, dict):
-        return
-    now = params.encoding()
-    was = {k: fitted[k] for k in now if k in fitted and fitted[k] != now[k]}
-    if was:
-        log.warning("vocabulary version %d's fusion scale was fit with %s; the encode settings say %s: "
-                    "rebuild the vocabulary (POST /admin/vocabulary/rebuild) to refit it",
-                    version, was, {k: now[k] for k in was})
+    changes = vocab.fusion_encoding_changes(params)
+    if changes:
+        log.warning("vocabulary version %d's fusion scale was fit with %s; its vectors are encoded with %s: "
+                    "rebuild the vocabulary (POST /admin/vocabulary/rebuild) to refit it", version,
+                    {k: fit for k, (fit, _) in changes.items()}, {k: now for k, (_, now) in changes.items()})
 
 
 def _warn_if_settings_wait(settings: EncodeParams, version: EncodeParams, version_id: int) -> None:
@@ -62,9 +57,6 @@ def _warn_if_settings_wait(settings: EncodeParams, version: EncodeParams, versio
     if now != kept:
         log.warning("vocabulary version %d encodes with %s, the encode settings say %s: they apply from the "
                     "next vocabulary rebuild (POST /admin/vocabulary/rebuild)", version_id, kept, now)
-
-
-ENCODING_KEYS = ("mode", "sigma_scale", "keypoints_only", "area_weighted")
 
 
 def stored_encoding(record: VocabularyRecord, vocab: Vocabulary) -> dict | None:
@@ -83,11 +75,9 @@ def version_params(ctx: ServiceContext, record: VocabularyRecord, vocab: Vocabul
     weighting (mode, σ, scope, area) the version was registered with, so that one version never holds
     vectors made two ways (and its fusion scale stays the one fit for them); the rest (fusion on or
     off) from this process's settings. New encode settings apply from the next vocabulary rebuild."""
-    params = ctx.settings.encode.params()
     stored = stored_encoding(record, vocab)
-    if stored is None:
-        return params
-    return replace(params, **{k: stored[k] for k in ENCODING_KEYS if k in stored})
+    params = ctx.settings.encode.params()
+    return params if stored is None else params.with_encoding(stored)
 
 
 def inside_data_dir(ctx: ServiceContext, relative: str) -> Path:
@@ -108,7 +98,8 @@ def register(ctx: ServiceContext, vocab: Vocabulary, activate: bool) -> int:
             trained_on=int(vocab.metadata.get("trained_on_descriptors", 0)),
             size=vocab.size,
             run=vocab.run,
-            metadata=vocab.describe_meta(),
+            # how every vector of this version will be encoded (version_params reads it back)
+            metadata=dict(vocab.describe_meta(), vectors_encoding=ctx.settings.encode.params().encoding()),
             created_at=vocab.metadata.get("created_at"),
         )
         directory = ctx.vocabulary_dir(vid)
@@ -118,7 +109,6 @@ def register(ctx: ServiceContext, vocab: Vocabulary, activate: bool) -> int:
         vocab.save(directory)
         ctx.blobs.share_dir(directory, conn)  # database blob backend: other hosts load it from there
         vocab_repo.set_path(conn, vid, str(directory.relative_to(ctx.data_dir)))
-        vocab_repo.set_vectors_encoding(conn, vid, ctx.settings.encode.params().encoding())
         if activate:
             vocab_repo.activate(conn, vid)
     return vid

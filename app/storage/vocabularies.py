@@ -55,15 +55,6 @@ def set_path(conn: sqlite3.Connection, vocabulary_id: int, path: str) -> None:
     conn.execute("UPDATE vocabularies SET path = ? WHERE id = ?", (path, vocabulary_id))
 
 
-def set_vectors_encoding(conn: sqlite3.Connection, vocabulary_id: int, encoding: dict) -> None:
-    """Record how the stored vectors of a version are encoded (its metadata's "vectors_encoding")."""
-    row = conn.execute("SELECT metadata FROM vocabularies WHERE id = ?", (vocabulary_id,)).fetchone()
-    if row is None:
-        return
-    metadata = dict(json.loads(dict(row)["metadata"] or "{}"), vectors_encoding=encoding)
-    conn.execute("UPDATE vocabularies SET metadata = ? WHERE id = ?", (json.dumps(metadata), vocabulary_id))
-
-
 def activate(conn: sqlite3.Connection, vocabulary_id: int) -> None:
     """Make `vocabulary_id` the one active version (call inside a write transaction)."""
     conn.execute("UPDATE vocabularies SET active = 0 WHERE active = 1")
@@ -95,7 +86,7 @@ def all_versions(conn: sqlite3.Connection) -> list[VocabularyRecord]:
 def put_vector(conn: sqlite3.Connection, model_id: int, vocabulary_id: int, vector: np.ndarray) -> None:
     """Store (or replace, with a new seq so pollers see it) one model's BoF for one version."""
     blob = np.ascontiguousarray(vector, dtype=np.float32).tobytes()
-    conn.execute("DELETE FROM bof WHERE model_id = ? AND vocabulary_id = ?", (model_id, vocabulary_id))
+    delete_vector(conn, model_id, vocabulary_id)
     conn.execute(
         "INSERT INTO bof (model_id, vocabulary_id, vector) VALUES (?, ?, ?)", (model_id, vocabulary_id, blob)
     )

@@ -145,3 +145,18 @@ def test_encoding_records_sigma_for_soft_bofs_only():
     assert EncodeParams(mode="hard", sigma_scale=0.7).encoding() == {
         "mode": "hard", "keypoints_only": False, "area_weighted": True
     }
+
+
+def test_a_recorded_encoding_is_read_back_and_compared_with_the_fusion_scale_s():
+    soft = EncodeParams(mode="soft", sigma_scale=0.7, fusion=False)
+    # with_encoding takes what encoding() recorded, and keeps what it does not name (fusion)
+    hard = EncodeParams(mode="hard")
+    assert hard.with_encoding(soft.encoding()) == EncodeParams(mode="soft", sigma_scale=0.7)
+    assert EncodeParams(fusion=False).with_encoding({"mode": "hard"}) == EncodeParams(mode="hard",
+                                                                                      fusion=False)
+    meta = {"encode": EncodeParams(mode="hard").encoding(), "fusion": {"bof": 1.0, "dna": 1.0, "weight": 1.0}}
+    fused = Vocabulary(WORDS, run="run5", sigma=0.5, metadata=meta)
+    assert fused.fusion_encoding_changes(EncodeParams(mode="hard")) == {}
+    assert fused.fusion_encoding_changes(EncodeParams()) == {"mode": ("hard", "soft")}
+    assert Vocabulary(WORDS, run="run5", metadata={"encode": meta["encode"]}).fusion_encoding_changes(
+        EncodeParams()) == {}  # no fusion scale: nothing weighted off

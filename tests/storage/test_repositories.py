@@ -100,16 +100,18 @@ def test_one_active_vocabulary_and_vectors_by_seq(db):
 
 
 def test_a_version_records_how_its_vectors_are_encoded(db):
+    encoding = {"mode": "soft", "sigma_scale": 1.0, "keypoints_only": False, "area_weighted": True}
     with db.write() as conn:
-        vid = vocab_repo.insert(conn, path="v", trained_on=10, size=4, run="run5", metadata={"seed": 3})
-        vocab_repo.set_vectors_encoding(conn, vid, {"mode": "hard", "area_weighted": True})
-        vocab_repo.set_vectors_encoding(conn, vid, {"mode": "soft", "sigma_scale": 1.0})  # replaced whole
-        vocab_repo.set_vectors_encoding(conn, vid + 1, {"mode": "soft"})  # no such version: nothing
+        vid = vocab_repo.insert(conn, path="v", trained_on=10, size=4, run="run5",
+                                metadata={"seed": 3, "vectors_encoding": encoding})
+        model = _model(conn, "enc")
+        vocab_repo.put_vector(conn, model, vid, np.ones(4))
+        vocab_repo.delete_vector(conn, model, vid)
+        vocab_repo.delete_vector(conn, model, vid + 1)  # no such version: nothing
     with db.read() as conn:
-        assert vocab_repo.get(conn, vid).metadata == {
-            "seed": 3, "vectors_encoding": {"mode": "soft", "sigma_scale": 1.0}
-        }
-        assert [v.id for v in vocab_repo.all_versions(conn)] == [vid]  # nothing was made for vid + 1
+        assert vocab_repo.get(conn, vid).metadata == {"seed": 3, "vectors_encoding": encoding}
+        assert [v.id for v in vocab_repo.all_versions(conn)] == [vid]
+        assert vocab_repo.vector_of(conn, model, vid) is None
 
 
 def test_deletes_cascade_and_never_remove_the_active_version(db):
