@@ -86,8 +86,11 @@ def pose(chains: list[Chain], rng: np.random.Generator) -> list[Segment]:
     return segments
 
 
-def surface(segments: list[Segment], grid: int = GRID, blend: float = BLEND) -> tuple[np.ndarray, np.ndarray]:
+def surface(segments: list[Segment], grid: int = GRID, blend: float = BLEND,
+            max_vertices: int | None = MAX_VERTICES) -> tuple[np.ndarray, np.ndarray]:
     """Zero level set of the smooth union of tapered capsules -> vertices (n, 3), faces (f, 3).
+
+    Decimated to `max_vertices` when marching cubes gives more (None: kept as extracted).
 
     Field: F(x) = -blend * log(sum_i exp(-d_i(x) / blend)), d_i the capsule distances (a soft min,
     independent of the order of the capsules, C-infinity where capsules meet). A capsule's term is
@@ -115,8 +118,8 @@ def surface(segments: list[Segment], grid: int = GRID, blend: float = BLEND) -> 
     verts, faces, _, _ = marching_cubes(field, level=0.0, spacing=(h, h, h))
     verts = verts.astype(np.float64) + lo
     faces = faces.astype(np.int64)
-    if len(verts) > MAX_VERTICES:
-        verts, faces = _simplify(verts, faces, MAX_VERTICES)
+    if max_vertices is not None and len(verts) > max_vertices:
+        verts, faces = _simplify(verts, faces, max_vertices)
     if _signed_volume(verts, faces) < 0:  # outward normals whatever marching cubes' convention
         faces = faces[:, ::-1].copy()
     return verts, faces
