@@ -30,6 +30,7 @@ class DescribeSettings(BaseModel):
     time_range: Literal["spectrum", "weyl"] = DescribeParams.time_range  # type: ignore[assignment]
     laplacian: Literal["cotangent", "intrinsic"] = DescribeParams.laplacian  # type: ignore[assignment]
     remesh: bool = DescribeParams.remesh
+    fill_holes: float = Field(default=DescribeParams.fill_holes, ge=0.0, lt=1.0)
     subdivision: str = DescribeParams.subdivision
     solver: str = "auto"
 

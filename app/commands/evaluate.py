@@ -63,6 +63,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="Taubin iterations before the eigen-solve (0: none; default %(default)s)")
     p.add_argument("--smoothing-weights", choices=WEIGHTS, default=EvaluationOptions.smoothing_weights,
                    help="Taubin weights: cotangent (intrinsic) or uniform (default %(default)s)")
+    p.add_argument("--fill-holes", type=float, default=EvaluationOptions.fill_holes, metavar="F",
+                   help="close holes whose cap adds at most F of the area (0: none; default %(default)s)")
     p.add_argument("--laplacian", choices=LAPLACIANS, default=EvaluationOptions.laplacian,
                    help="cotangent (the paper's) or intrinsic (intrinsic Delaunay; default %(default)s)")
     p.add_argument("--remesh", action=argparse.BooleanOptionalAction, default=EvaluationOptions.remesh,
@@ -125,6 +127,7 @@ def run(args: argparse.Namespace) -> int:
         time_range=args.time_range,
         smoothing=args.smoothing,
         smoothing_weights=args.smoothing_weights,
+        fill_holes=args.fill_holes,
         laplacian=args.laplacian,
         remesh=args.remesh,
         subdivision=args.subdivision,

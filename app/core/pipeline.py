@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from app.core import hks as hks_mod
+from app.core.holes import fill_holes
 from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import LAPLACIANS, laplacian
 from app.core.mesh import Mesh
@@ -52,6 +53,10 @@ class DescribeParams:
     # spends vertices on the area that noise adds (noise variant: -23 points); an option
     remesh: bool = False
     subdivision: str = "midpoint"  # how coarse meshes reach the canonical resolution: midpoint | loop
+    # close each boundary loop whose centroid cap adds at most this fraction of the surface's area
+    # (app.core.holes); 0 leaves every hole open. Scan-like open shapes (benchmarks/scans.py): +8.8
+    # points pure, +4.4 fused; closed meshes are untouched (docs/results.md, round 8)
+    fill_holes: float = 0.05
     solver: str = "auto"  # auto | dense | sparse
     keypoint_filter: KeypointFilter = field(default_factory=KeypointFilter)
 
@@ -64,6 +69,8 @@ class DescribeParams:
                              f"not {self.smoothing_weights!r}")
         if self.laplacian not in LAPLACIANS:
             raise ValueError(f"laplacian must be one of {', '.join(LAPLACIANS)}, not {self.laplacian!r}")
+        if not 0.0 <= self.fill_holes < 1.0:
+            raise ValueError(f"fill_holes must be in [0, 1), not {self.fill_holes!r}")
         if self.time_range not in hks_mod.TIME_RANGES:
             known = ", ".join(hks_mod.TIME_RANGES)
             raise ValueError(f"time_range must be one of {known}, not {self.time_range!r}")
@@ -120,6 +127,13 @@ class ShapeDescription:
             )
 
 
+def canonical_mesh(mesh: Mesh, params: DescribeParams) -> Mesh:
+    """The mesh whose vertices the description is of (before smoothing moves them): the canonical
+    resolution, small holes closed. vertices (n, 3), faces (f, 3)."""
+    fine = to_resolution(mesh, params.target_vertices, subdivision=params.subdivision)
+    return fill_holes(fine, params.fill_holes)[0]
+
+
 def describe(mesh: Mesh, params: DescribeParams | None = None) -> ShapeDescription:
     """Mesh (already validated and cleaned by mesh.load_mesh) -> ShapeDescription."""
     params = params or DescribeParams()
@@ -133,7 +147,7 @@ def describe_filters(
     solve is the cost). Description i equals describe(mesh, replace(params, keypoint_filter=filters[i]))."""
     clock = _Clock()
     # resampling and smoothing are scale-free: one normalisation, after them, gives unit area
-    fine = to_resolution(mesh, params.target_vertices, subdivision=params.subdivision)
+    fine = canonical_mesh(mesh, params)
     smoothed = (cotangent_taubin(fine, params.smoothing) if params.smoothing_weights == "cotangent"
                 else smooth(fine, params.smoothing))
     # remeshing after smoothing: an even sampling of a noisy surface spends its vertices on the

@@ -54,6 +54,7 @@ class EvaluationOptions:
     time_range: str = DescribeParams.time_range  # weyl | spectrum (the paper's t_min)
     smoothing: int = DescribeParams.smoothing  # Taubin iterations
     smoothing_weights: str = DescribeParams.smoothing_weights  # cotangent (intrinsic) | uniform
+    fill_holes: float = DescribeParams.fill_holes  # largest cap closed, fraction of the area
     laplacian: str = DescribeParams.laplacian  # cotangent | intrinsic (intrinsic Delaunay)
     remesh: bool = DescribeParams.remesh  # isotropic remeshing at the canonical resolution
     subdivision: str = DescribeParams.subdivision  # midpoint | loop
@@ -104,7 +105,7 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
             k=options.k, target_vertices=options.target_vertices, time_range=options.time_range,
             smoothing=options.smoothing,
             smoothing_weights=options.smoothing_weights, laplacian=options.laplacian, remesh=options.remesh,
-            subdivision=options.subdivision, keypoint_filter=flt,
+            subdivision=options.subdivision, fill_holes=options.fill_holes, keypoint_filter=flt,
         )
     except ValueError as exc:  # e.g. an unknown subdivision
         raise EvaluationError(str(exc)) from exc
@@ -114,7 +115,7 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
             bof = [Row(name, "bof", base, name)]
         elif name == "paper":
             paper = replace(base, k=300, target_vertices=0, smoothing=0, time_range="spectrum",
-                            laplacian="cotangent", remesh=False)
+                            laplacian="cotangent", remesh=False, fill_holes=0.0)
             # eq. 8, a sum over vertices, hard VQ (eq. 6): as the paper's Table 2 was computed
             bof = [Row(name, "bof", paper, "run5", area_weighted=False, mode="hard")]
         else:

@@ -17,8 +17,7 @@ import numpy as np
 
 from app.core.explain import ShapeWords, contributions, shape_words, top_words
 from app.core.mesh import Mesh, load_mesh
-from app.core.pipeline import DescribeParams, ShapeDescription, describe
-from app.core.resolution import to_resolution
+from app.core.pipeline import DescribeParams, ShapeDescription, canonical_mesh, describe
 from app.core.vocabulary import EncodeParams, Vocabulary
 from app.services.context import ServiceContext
 from app.services.errors import ConflictError, InvalidInputError, NotFoundError
@@ -61,7 +60,7 @@ class Explanation:
 
 
 def _canonical(mesh: Mesh, params: DescribeParams) -> Geometry:
-    fine = to_resolution(mesh, params.target_vertices, subdivision=params.subdivision)
+    fine = canonical_mesh(mesh, params)
     # centred and turned as the thumbnails are (upright, largest silhouette facing the camera): a viewer
     # opens on the same picture as the card it came from
     v = fine.vertices.astype(np.float64)

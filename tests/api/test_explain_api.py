@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from app.core.holes import boundary_loops
 from app.main import create_app
 from tests.conftest import make_settings
 
@@ -65,6 +66,27 @@ def test_an_uploaded_query_is_explained_against_a_stored_model(client: TestClien
     assert e["shape"]["model_id"] is None and e["shape"]["name"] == path.name
     _check_shape(e["shape"], e["words"])
     assert e["distance"] == pytest.approx(search["distance"], rel=1e-4, abs=1e-5)
+
+
+def test_an_open_query_is_explained_on_the_surface_it_was_described_on(client: TestClient) -> None:
+    """A scan with a hole: the description is of the closed surface (app.core.holes), and so is the
+    geometry the viewer gets, vertex for vertex (else: 422, "re-ingest it")."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    sphere.vertices *= [2.0, 1.0, 0.7]
+    keep = sphere.triangles_center[:, 2] < 0.67  # a hole at the top, ~2 % of the area
+    holed = trimesh.Trimesh(sphere.vertices, sphere.faces[keep])
+    holed.remove_unreferenced_vertices()
+    assert not holed.is_watertight
+    files = {"file": ("scan.obj", trimesh.exchange.obj.export_obj(holed).encode())}
+    r = client.post("/explain", files=files, data={"against": "1"})
+    assert r.status_code == 200, r.text
+    e = r.json()
+    _check_shape(e["shape"], e["words"])
+    faces = np.asarray(e["shape"]["faces"]).reshape(-1, 3)
+    loops = boundary_loops(faces, len(e["shape"]["words"]))
+    assert all(len(loop) <= 4 for loop in loops)  # the hole is closed in what the viewer shows
 
 
 @pytest.mark.parametrize(

@@ -98,6 +98,7 @@ def test_fingerprint_names_every_parameter_that_changes_the_description():
     assert a.fingerprint() != DescribeParams(smoothing=0).fingerprint()
     assert a.fingerprint() != DescribeParams(smoothing_weights="cotangent").fingerprint()
     assert a.fingerprint() != DescribeParams(time_range="weyl").fingerprint()
+    assert a.fingerprint() != DescribeParams(fill_holes=0.0).fingerprint()
     other_laplacian = "cotangent" if a.laplacian == "intrinsic" else "intrinsic"
     assert a.fingerprint() != DescribeParams(laplacian=other_laplacian).fingerprint()
     assert a.fingerprint() != DescribeParams(remesh=not a.remesh).fingerprint()
