@@ -1,12 +1,14 @@
-"""The realworld and large-input benchmarks run end to end on 2-3 files (no timing assertions)."""
+"""The realworld, self-retrieval and large-input benchmarks run end to end on 2-3 files (no timing
+assertions)."""
 
 from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
-from benchmarks import common, large_inputs, realworld
+from benchmarks import common, large_inputs, realworld, selfretrieval
 
 needs_corpus = pytest.mark.skipif(
     not realworld.CORPUS.is_dir(), reason="the realworld corpus is not on this machine (../shared)"
@@ -88,3 +90,27 @@ def test_large_inputs_benchmark_runs_ours_and_the_baseline(tmp_path, monkeypatch
     for r in rows:
         assert r["outcome"] == "described" and r["vertices_in"] > 10_000
         assert r["peak_mb"] >= r["load_peak_mb"] >= r["base_mb"] > 0
+
+
+def test_self_retrieval_scores_ranks_by_l1_with_ties_for_the_copy():
+    originals = np.array([[0.0, 0.0], [1.0, 0.0], [3.0, 0.0]])
+    # copy 0 nearest its own; copy 1 as near to original 0 as to its own (L1 0.5 both: a tie, rank 1);
+    # copy 2 nearer originals 1 (L1 1.2) and 0 (2.2) than its own (2.8): rank 3
+    queries = np.array([[0.2, 0.0], [0.5, 0.0], [1.2, 1.0]])
+    s = selfretrieval.scores(queries, originals)
+    assert s["NN"] == pytest.approx(2 / 3)
+    assert s["MRR"] == pytest.approx((1 + 1 + 1 / 3) / 3)
+    assert s["top5"] == 1.0
+
+
+@pytest.mark.slow
+@needs_corpus
+def test_self_retrieval_benchmark_finds_copies_and_records_the_setting(tmp_path, capsys):
+    code = selfretrieval.main(["--files", "oded__wingnut.obj", "--files", "oded__demosthenes-low-res.obj",
+                               "--files", "trimesh__empty.stl", "--fill-holes", "0", "--name", "sr-smoke"])
+    out = capsys.readouterr().out
+    assert "fused (served) | retriangulated" in out and code == 0
+    doc = _json(tmp_path, "sr-smoke")
+    assert doc["files"] == 2 and doc["refused"] == 1 and doc["describe"] == {"fill_holes": 0.0}
+    for line in doc["lines"].values():
+        assert 0.5 <= line["MRR"] <= 1.0 and line["top5"] == 1.0  # of two, its own is at worst second
