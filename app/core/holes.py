@@ -8,7 +8,7 @@ around the centroid of its rim: the patch is flat, not the surface that was ther
 path across the gap of about the right length, which is what the spectrum sees.
 
 A large loop is part of the shape, not a gap (the rim of a cup, the edge of a sheet, the outline of a
-flat part): a loop is closed only if its cap adds at most `max_area_fraction` of the surface's area.
+flat part): a loop is closed only if its cap adds at most `max_area_fraction` of its piece's area.
 Loops through a pinched vertex (a vertex on two boundary loops, or on a loop twice) are left open:
 their order along the rim is not defined.
 """
@@ -20,7 +20,7 @@ import scipy.sparse as sp
 
 from app.core.mesh import Mesh
 
-MIN_CAP = 1e-6  # caps below this fraction of the area are slits or punctures, not holes
+MIN_CAP_FACE = 0.01  # a cap triangle under this fraction of the mean face area is a sliver
 
 
 def boundary_loops(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
@@ -64,26 +64,34 @@ def boundary_loops(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
 def fill_holes(mesh: Mesh, max_area_fraction: float) -> tuple[Mesh, int]:
     """(mesh with its small holes closed, number of holes closed).
 
-    Each loop whose centroid fan has an area <= max_area_fraction x the surface's area gets one new
-    vertex (the rim's centroid) and one triangle per rim edge, wound like the faces beside it.
-    Loops of (almost) no area are left as they are: a slit, or a puncture where decimation collapsed a
-    face to a point and cleaning removed it (its three vertices ~1e-8 apart). A fan there would add a
-    vertex without area, which the mass matrix cannot take; welding the puncture shut instead was
-    measured and cost 0.23 points of pure BoF on SHREC'11's triangulation variant (docs/results.md).
+    Each loop whose centroid fan has an area <= max_area_fraction x the area of the loop's own
+    connected piece gets one new vertex (the rim's centroid) and one triangle per rim edge, wound like
+    the faces beside it. The piece's area, not the whole mesh's: a small open part beside a big closed
+    one (a sheet, a tube) keeps its outline.
+    A loop is left as it is when any triangle of its fan would be a sliver (under MIN_CAP_FACE x the
+    mesh's mean face area): a slit, a puncture where decimation collapsed a face to a point and cleaning
+    removed it (its three vertices ~1e-8 apart), or a non-convex rim whose centroid falls on the line of
+    one of its edges. Such a triangle gives a vertex (almost) without area, which the mass matrix cannot
+    take, or a cotangent weight of ~1e307. Welding punctures shut instead was measured and cost 0.23
+    points of pure BoF on SHREC'11's triangulation variant (docs/results.md, round 8).
     max_area_fraction <= 0 returns the mesh unchanged. vertices (n, 3) -> (n + closed, 3).
     """
     if max_area_fraction <= 0:
         return mesh, 0
     v, f = mesh.vertices, mesh.faces
-    area = float(mesh.face_areas().sum())
-    budget = max_area_fraction * area
+    loops = boundary_loops(f, len(v))
+    if not loops:
+        return mesh, 0
+    face_areas = mesh.face_areas()
+    sliver = MIN_CAP_FACE * float(face_areas.mean())
+    piece_area = _piece_areas(f, face_areas, len(v))  # (n,) area of each vertex's connected piece
     new_vertices: list[np.ndarray] = []
     new_faces: list[np.ndarray] = []
-    for loop in boundary_loops(f, len(v)):
+    for loop in loops:
         centre = v[loop].mean(axis=0)
         rim = np.stack([loop, np.roll(loop, -1)], axis=1)  # (L, 2): edge a -> b of the rim
-        cap = 0.5 * np.linalg.norm(np.cross(v[rim[:, 0]] - centre, v[rim[:, 1]] - centre), axis=1).sum()
-        if not MIN_CAP * area < cap <= budget:
+        fan = 0.5 * np.linalg.norm(np.cross(v[rim[:, 0]] - centre, v[rim[:, 1]] - centre), axis=1)  # (L,)
+        if fan.min() < sliver or fan.sum() > max_area_fraction * piece_area[loop[0]]:
             continue
         index = len(v) + len(new_vertices)
         new_vertices.append(centre)
@@ -92,3 +100,13 @@ def fill_holes(mesh: Mesh, max_area_fraction: float) -> tuple[Mesh, int]:
     if not new_vertices:
         return mesh, 0
     return Mesh(np.vstack([v, np.asarray(new_vertices)]), np.vstack([f, *new_faces])), len(new_vertices)
+
+
+def _piece_areas(faces: np.ndarray, face_areas: np.ndarray, n_vertices: int) -> np.ndarray:
+    """(n,) for each vertex, the total area of the connected piece (faces sharing vertices) it is on."""
+    adjacency = sp.coo_matrix((np.ones(2 * len(faces)), (np.r_[faces[:, 0], faces[:, 1]],
+                                                         np.r_[faces[:, 1], faces[:, 2]])),
+                              shape=(n_vertices, n_vertices))
+    _, piece = sp.csgraph.connected_components(adjacency, directed=False)
+    area = np.bincount(piece[faces[:, 0]], weights=face_areas, minlength=piece.max() + 1)
+    return area[piece]

@@ -53,7 +53,7 @@ class DescribeParams:
     # spends vertices on the area that noise adds (noise variant: -23 points); an option
     remesh: bool = False
     subdivision: str = "midpoint"  # how coarse meshes reach the canonical resolution: midpoint | loop
-    # close each boundary loop whose centroid cap adds at most this fraction of the surface's area
+    # close each boundary loop whose centroid cap adds at most this fraction of its piece's area
     # (app.core.holes); 0 leaves every hole open. Scan-like open shapes (benchmarks/scans.py): +8.8
     # points pure, +4.4 fused; closed meshes are untouched (docs/results.md, round 8)
     fill_holes: float = 0.05

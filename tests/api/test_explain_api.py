@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
 from app.core.holes import boundary_loops
+from app.core.pipeline import canonical_mesh
 from app.main import create_app
+from app.services.mesh_policy import load_upload
 from tests.conftest import make_settings
 
 
@@ -87,6 +90,12 @@ def test_an_open_query_is_explained_on_the_surface_it_was_described_on(client: T
     faces = np.asarray(e["shape"]["faces"]).reshape(-1, 3)
     loops = boundary_loops(faces, len(e["shape"]["words"]))
     assert all(len(loop) <= 4 for loop in loops)  # the hole is closed in what the viewer shows
+    # ... and it was open at the canonical resolution: the description has the cap's vertex more
+    params = client.app.state.settings.describe.params()
+    mesh = load_upload(files["file"][1], "obj", None)
+    open_mesh = canonical_mesh(mesh, replace(params, fill_holes=0.0))
+    assert max(len(loop) for loop in boundary_loops(open_mesh.faces, open_mesh.n_vertices)) >= 6
+    assert len(e["shape"]["words"]) == canonical_mesh(mesh, params).n_vertices > open_mesh.n_vertices
 
 
 @pytest.mark.parametrize(

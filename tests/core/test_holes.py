@@ -179,3 +179,47 @@ def test_the_heat_kernel_by_a_closed_hole_is_the_whole_spheres_again(times_index
     closed_error = np.abs(k_closed[near(v_closed)] / reference - 1).max()
     assert open_error > 0.1
     assert closed_error < open_error / 3
+
+
+def _grid(n: int) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int]]]:
+    """A flat n x n grid of unit squares, two triangles each: vertices, faces, the cell of each face."""
+    xs = np.arange(n + 1.0)
+    x, y = np.meshgrid(xs, xs, indexing="ij")
+    v = np.c_[x.ravel(), y.ravel(), np.zeros(x.size)]
+    idx = np.arange(len(v)).reshape(n + 1, n + 1)
+    faces, cells = [], []
+    for i in range(n):
+        for j in range(n):
+            a, b, c, d = idx[i, j], idx[i + 1, j], idx[i + 1, j + 1], idx[i, j + 1]
+            faces += [[a, b, c], [a, c, d]]
+            cells += [(i, j), (i, j)]
+    return v, np.asarray(faces, np.int64), cells
+
+
+def test_a_rim_whose_centroid_lies_on_one_of_its_edges_is_left_open():
+    """A non-convex hole in a flat grid whose rim centroid falls on the line of a rim edge: its fan
+    would hold a triangle of no area (a cotangent weight of ~1e307), so the hole is not closed."""
+    v, f, cells = _grid(30)
+    gone = {(13, 14), (13, 15), (14, 14), (15, 14), (15, 15), (16, 14), (16, 15)}
+    sheet = _compact(Mesh(v, f[[c not in gone for c in cells]]))
+    assert len(boundary_loops(sheet.faces, sheet.n_vertices)) == 2  # the outline and the hole
+    out, closed = fill_holes(sheet, 0.05)
+    assert closed == 0 and out is sheet
+    # a square hole in the same sheet has a fan of 8 equal triangles, and is closed
+    square = {(13, 13), (13, 14), (14, 13), (14, 14)}
+    sheet = _compact(Mesh(v, f[[c not in square for c in cells]]))
+    out, closed = fill_holes(sheet, 0.05)
+    assert closed == 1 and out.face_areas().min() > 0.4
+    assert len(boundary_loops(out.faces, out.n_vertices)) == 1  # the outline stays
+
+
+def test_a_small_open_part_beside_a_big_closed_one_keeps_its_outline():
+    """The budget is the loop's own piece's area: a sheet of 2 % of the whole is not folded shut."""
+    sphere = _sphere()
+    v, f, _ = _grid(4)
+    side = np.sqrt(0.02 * sphere.face_areas().sum())
+    sheet_v = v * (side / 4) + [3.0, 0.0, 0.0]
+    both = Mesh(np.vstack([sphere.vertices, sheet_v]), np.vstack([sphere.faces, f + sphere.n_vertices]))
+    assert len(boundary_loops(both.faces, both.n_vertices)) == 1
+    out, closed = fill_holes(both, 0.05)
+    assert closed == 0 and out is both
