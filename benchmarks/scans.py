@@ -25,14 +25,15 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
 import trimesh
 from scipy.spatial.transform import Rotation
 
+from app.core.cleaning import vertex_components
 from app.core.mesh import Mesh, clean
 from app.datasets.bodyplans import PLANS
-from app.datasets.synthetic import pose, surface
+from app.datasets.synthetic import _simplify, pose, surface
 from app.storage.blobs import atomic_write
+from benchmarks.variants import _obj_text
 
 FINE_GRID = 200  # voxels along the longest side: ~13k-46k vertices from marching cubes
 VERTEX_RANGE = (4_000, 40_000)
@@ -68,9 +69,7 @@ def _with_holes(mesh: Mesh, rng: np.random.Generator, holes: tuple[int, int]) ->
         radius = rng.uniform(*HOLE_RADIUS) * diag
         keep &= np.linalg.norm(centroids - centre, axis=1) > radius
     f = f[keep]
-    n = len(v)
-    adj = sp.coo_matrix((np.ones(3 * len(f)), (f.ravel(), f[:, [1, 2, 0]].ravel())), shape=(n, n))
-    _, labels = sp.csgraph.connected_components(adj, directed=False)
+    labels = vertex_components(Mesh(v, f))
     used = np.unique(f)
     biggest = np.bincount(labels[used]).argmax()
     f = f[labels[f[:, 0]] == biggest]
@@ -78,13 +77,9 @@ def _with_holes(mesh: Mesh, rng: np.random.Generator, holes: tuple[int, int]) ->
 
 
 def _decimate(mesh: Mesh, target: int) -> Mesh:
-    import fast_simplification  # compiled; a dependency of the core already
-
     if mesh.n_vertices <= target:
         return mesh
-    v, f = fast_simplification.simplify(mesh.vertices.astype(np.float32), mesh.faces.astype(np.int32),
-                                        target_reduction=1.0 - target / mesh.n_vertices, agg=3)
-    return clean(Mesh(np.asarray(v, np.float64), np.asarray(f, np.int64)))
+    return clean(Mesh(*_simplify(mesh.vertices, mesh.faces, target)))
 
 
 def generate(out: Path | str, classes: int = 8, per_class: int = 12, seed: int = 0,
@@ -100,9 +95,7 @@ def generate(out: Path | str, classes: int = 8, per_class: int = 12, seed: int =
             mesh = scan_shape(name, rng, grid=grid, holes=holes, noise=noise, vertex_range=vertex_range)
             rel = f"{name}/{name}_{i:02d}.obj"
             (dest / name).mkdir(parents=True, exist_ok=True)
-            text = [f"v {x:.7g} {y:.7g} {z:.7g}\n" for x, y, z in mesh.vertices]
-            text += [f"f {a} {b} {c_}\n" for a, b, c_ in mesh.faces + 1]
-            atomic_write(dest / rel, "".join(text).encode())
+            atomic_write(dest / rel, _obj_text(mesh).encode())
             lines.append(f"{rel},{name}\n")
     atomic_write(dest / "labels.csv", ("file,class\n" + "".join(lines)).encode())  # last: a complete folder
     return dest

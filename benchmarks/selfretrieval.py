@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from multiprocessing import get_context
@@ -30,14 +29,12 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import table, write_json
+from benchmarks.common import pin_threads, table, write_json
 from benchmarks.realworld import CORPUS, corpus_entries, upload_of
 
 
 def _describe_copies(entry: str, params_kwargs: dict, seed: int) -> dict | None:
     """(child) Original, re-triangulated and noisy descriptions of one corpus entry, or None if refused."""
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[var] = "1"
     from app.config import Settings
     from app.core.mesh import InvalidMeshError
     from app.core.pipeline import DescribeParams, describe
@@ -77,7 +74,7 @@ def run(patterns: list[str], jobs: int, params_kwargs: dict, seed: int) -> dict:
     from app.core.vocabulary import EncodeParams, Vocabulary
 
     entries = [str(e) for e in corpus_entries(CORPUS, patterns or ["*"])]
-    with ProcessPoolExecutor(jobs, mp_context=get_context("spawn")) as pool:
+    with ProcessPoolExecutor(jobs, mp_context=get_context("spawn"), initializer=pin_threads) as pool:
         described = [r for r in pool.map(_describe_copies, entries, [params_kwargs] * len(entries),
                                          [seed] * len(entries)) if r is not None]
     failed = [r for r in described if "error" in r]
@@ -106,8 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     overrides = {k: v for k, v in (("fill_holes", a.fill_holes), ("smoothing", a.smoothing)) if v is not None}
     result = run(a.files or [], a.jobs, overrides, a.seed)
-    rows = [{"encoding | copy": name, **{k: f"{v[key]:.3f}" for k, key in (("NN", "NN"), ("MRR", "MRR"),
-                                                                            ("top 5", "top5"))}}
+    rows = [{"encoding | copy": name, "NN": v["NN"], "MRR": v["MRR"], "top 5": v["top5"]}
             for name, v in result["lines"].items()]
     print(table(rows))
     print(f"{result['files']} files described (3 ways each), {result['refused']} refused; "

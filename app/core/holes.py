@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from app.core.cleaning import vertex_components
 from app.core.mesh import Mesh
 
 MIN_CAP_FACE = 0.01  # a cap triangle under this fraction of the mean face area is a sliver
@@ -84,14 +85,15 @@ def fill_holes(mesh: Mesh, max_area_fraction: float) -> tuple[Mesh, int]:
         return mesh, 0
     face_areas = mesh.face_areas()
     sliver = MIN_CAP_FACE * float(face_areas.mean())
-    piece_area = _piece_areas(f, face_areas, len(v))  # (n,) area of each vertex's connected piece
+    piece = vertex_components(mesh)  # (n,) connected piece of each vertex
+    piece_area = np.bincount(piece[f[:, 0]], weights=face_areas, minlength=piece.max() + 1)  # per piece
     new_vertices: list[np.ndarray] = []
     new_faces: list[np.ndarray] = []
     for loop in loops:
         centre = v[loop].mean(axis=0)
         rim = np.stack([loop, np.roll(loop, -1)], axis=1)  # (L, 2): edge a -> b of the rim
         fan = 0.5 * np.linalg.norm(np.cross(v[rim[:, 0]] - centre, v[rim[:, 1]] - centre), axis=1)  # (L,)
-        if fan.min() < sliver or fan.sum() > max_area_fraction * piece_area[loop[0]]:
+        if fan.min() < sliver or fan.sum() > max_area_fraction * piece_area[piece[loop[0]]]:
             continue
         index = len(v) + len(new_vertices)
         new_vertices.append(centre)
@@ -101,12 +103,3 @@ def fill_holes(mesh: Mesh, max_area_fraction: float) -> tuple[Mesh, int]:
         return mesh, 0
     return Mesh(np.vstack([v, np.asarray(new_vertices)]), np.vstack([f, *new_faces])), len(new_vertices)
 
-
-def _piece_areas(faces: np.ndarray, face_areas: np.ndarray, n_vertices: int) -> np.ndarray:
-    """(n,) for each vertex, the total area of the connected piece (faces sharing vertices) it is on."""
-    adjacency = sp.coo_matrix((np.ones(2 * len(faces)), (np.r_[faces[:, 0], faces[:, 1]],
-                                                         np.r_[faces[:, 1], faces[:, 2]])),
-                              shape=(n_vertices, n_vertices))
-    _, piece = sp.csgraph.connected_components(adjacency, directed=False)
-    area = np.bincount(piece[faces[:, 0]], weights=face_areas, minlength=piece.max() + 1)
-    return area[piece]
