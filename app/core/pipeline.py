@@ -17,11 +17,11 @@ from app.core import hks as hks_mod
 from app.core.holes import fill_holes
 from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import LAPLACIANS, laplacian
-from app.core.mesh import Mesh
+from app.core.mesh import InvalidMeshError, Mesh
 from app.core.remeshing import isotropic_remesh
 from app.core.resolution import SUBDIVISIONS, normalize_scale, smooth, to_resolution
 from app.core.smoothing import WEIGHTS, cotangent_taubin
-from app.core.spectrum import smallest_eigenpairs
+from app.core.spectrum import SpectrumError, smallest_eigenpairs
 
 DESCRIPTION_FORMAT = 1
 
@@ -146,8 +146,18 @@ def describe_filters(
     """One eigen-solve, one description per keypoint filter (the harness compares filters; the
     solve is the cost). Description i equals describe(mesh, replace(params, keypoint_filter=filters[i]))."""
     clock = _Clock()
+    return _from_canonical(canonical_mesh(mesh, params), mesh.n_vertices, params, filters, clock)
+
+
+def describe_canonical(fine: Mesh, input_vertices: int, params: DescribeParams) -> ShapeDescription:
+    """describe(mesh, params) from canonical_mesh(mesh, params), for a caller that needs both (the
+    explain view): the mesh is resampled once."""
+    return _from_canonical(fine, input_vertices, params, [params.keypoint_filter], _Clock())[0]
+
+
+def _from_canonical(fine: Mesh, input_vertices: int, params: DescribeParams,
+                    filters: Sequence[KeypointFilter], clock: _Clock) -> list[ShapeDescription]:
     # resampling and smoothing are scale-free: one normalisation, after them, gives unit area
-    fine = canonical_mesh(mesh, params)
     smoothed = (cotangent_taubin(fine, params.smoothing) if params.smoothing_weights == "cotangent"
                 else smooth(fine, params.smoothing))
     # remeshing after smoothing: an even sampling of a noisy surface spends its vertices on the
@@ -158,9 +168,12 @@ def describe_filters(
     clock.lap("resample")
     stiffness, mass = laplacian(work.vertices, work.faces, params.laplacian)
     clock.lap("laplacian")
-    spectrum = smallest_eigenpairs(stiffness, mass, params.k, method=params.solver)
-    clock.lap("eigen")
-    times = hks_mod.time_scales(spectrum.eigenvalues, params.m, params.time_range)
+    try:
+        spectrum = smallest_eigenpairs(stiffness, mass, params.k, method=params.solver)
+        clock.lap("eigen")
+        times = hks_mod.time_scales(spectrum.eigenvalues, params.m, params.time_range)
+    except SpectrumError as exc:  # the mesh's, not the server's: a clear refusal (422), never retried
+        raise InvalidMeshError(f"the mesh's Laplace-Beltrami spectrum could not be computed: {exc}") from exc
     raw = hks_mod.heat_kernel_signature(spectrum, times)
     h = hks_mod.normalize(raw)
     clock.lap("hks")
@@ -169,7 +182,7 @@ def describe_filters(
     hks32, weights = h.astype(np.float32), mass.diagonal().astype(np.float32)
     return [
         ShapeDescription(hks=hks32, weights=weights, keypoints=mask, eigenvalues=spectrum.eigenvalues,
-                         input_vertices=mesh.n_vertices, seconds=dict(clock.laps))
+                         input_vertices=input_vertices, seconds=dict(clock.laps))
         for mask in masks
     ]
 

@@ -27,6 +27,9 @@ import scipy.sparse.linalg as sla
 DENSE_MAX = 3000
 # accept the mixed-precision result when every residual ‖Aψ - μψ‖ is below this fraction of λ_k
 MIXED_RESIDUAL_TOL = 1e-3
+# the dense solve is refused when λ_k <= RELIABLE_ABOVE * eps * ||A|| (at the canonical resolution
+# λ_k / ||A|| is ~0.1-0.5)
+RELIABLE_ABOVE = 1e3
 
 
 class SpectrumError(RuntimeError):
@@ -50,6 +53,8 @@ def smallest_eigenpairs(
     mass_diag = np.asarray(mass.diagonal(), dtype=np.float64)
     if np.any(mass_diag <= 0):
         raise SpectrumError("a vertex has zero area: the mass matrix is singular")
+    if not (np.all(np.isfinite(mass_diag)) and np.all(np.isfinite(sp.csr_matrix(stiffness).data))):
+        raise SpectrumError("the Laplacian has non-finite entries (a degenerate triangle?)")
     # components only matter to the dense path: large meshes go to ARPACK without the graph search
     small = method == "blocks" or (method == "auto" and n <= DENSE_MAX)
     blocks = _component_blocks(stiffness) if small else []
@@ -119,15 +124,22 @@ def _dense(
         vals, psi = la.eigh(
             a.toarray(), subset_by_index=[0, k - 1], driver="evr", overwrite_a=True, check_finite=False
         )
+    # a dense solver's eigenvalues carry an absolute error of ~eps ||A||: when even the largest of the
+    # k is inside it (a weight of 1e16 beside weights of 1), the spectrum is round-off, not the mesh's
+    norm = float(abs(a).sum(axis=1).max()) if a.nnz else 0.0
+    if len(vals) >= 2 and not vals[-1] > RELIABLE_ABOVE * np.finfo(np.float64).eps * norm:
+        raise SpectrumError("the Laplacian is too ill-conditioned for its spectrum to be computed "
+                            f"(largest of {len(vals)} eigenvalues {vals[-1]:.3g}, operator norm {norm:.3g})")
     return vals, psi * inv_sqrt[:, None]  # φ = M^-1/2 ψ is M-orthonormal
 
 
 def _mixed_precision(a: sp.csr_matrix, k: int) -> tuple[np.ndarray, np.ndarray | None]:
     """float32 eigh for the subspace, float64 Rayleigh-Ritz on it; (vals, None) if not accurate."""
-    _, w32 = la.eigh(
-        a.astype(np.float32).toarray(), subset_by_index=[0, k - 1], driver="evr",
-        overwrite_a=True, check_finite=False,
-    )
+    with np.errstate(over="ignore"):  # an overflowing float32 copy is detected below
+        a32 = a.astype(np.float32).toarray()
+    _, w32 = la.eigh(a32, subset_by_index=[0, k - 1], driver="evr", overwrite_a=True, check_finite=False)
+    if w32.shape[1] < k or not np.all(np.isfinite(w32)):  # float32 overflowed (entries ~1e19 and up)
+        return np.zeros(0), None
     q, _ = la.qr(w32.astype(np.float64), mode="economic", overwrite_a=True, check_finite=False)  # (n, k)
     aq = a @ q  # (n, k)
     small = q.T @ aq  # (k, k) = Qᵀ A Q

@@ -157,3 +157,18 @@ def test_weyl_time_range_makes_the_hks_less_dependent_on_the_triangulation(shrec
     # depends on the triangulation, so the paper's t_min does as well as Weyl's with the cotangent one
     intrinsic = mismatch("spectrum", "intrinsic")
     assert intrinsic < 0.7 * spectrum, (intrinsic, spectrum)
+
+
+def test_a_spectrum_that_cannot_be_computed_is_an_invalid_mesh(shrec_mesh, monkeypatch):
+    # SpectrumError is a RuntimeError: uncaught, the service answered 500 and the worker retried a job
+    # that can only fail again; as InvalidMeshError it is a 422 and a job failed at once, with the reason
+    import app.core.pipeline as pipeline
+    from app.core.mesh import InvalidMeshError
+    from app.core.spectrum import SpectrumError
+
+    def fail(*args, **kwargs):
+        raise SpectrumError("the eigen-solver did not converge: test")
+
+    monkeypatch.setattr(pipeline, "smallest_eigenpairs", fail)
+    with pytest.raises(InvalidMeshError, match="spectrum could not be computed: the eigen-solver did not"):
+        describe(shrec_mesh, DescribeParams())

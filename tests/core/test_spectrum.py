@@ -94,3 +94,43 @@ def test_many_parts_are_solved_per_component_with_the_same_spectrum():
     # "auto" picks the per-component solve for a multi-part mesh at the canonical size
     auto = smallest_eigenpairs(L, M, k=k)
     assert np.allclose(auto.eigenvalues, exact.eigenvalues, rtol=1e-8, atol=1e-9)
+
+
+def _path_laplacian(weights: np.ndarray):
+    """(n, n) graph Laplacian of a path whose edge i joins vertices i and i + 1 with weights[i]."""
+    import scipy.sparse as sp
+
+    n = len(weights) + 1
+    i = np.arange(n - 1)
+    w = sp.coo_matrix((weights, (i, i + 1)), shape=(n, n))
+    w = (w + w.T).tocsr()
+    return sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w, sp.identity(n, format="csr")
+
+
+def test_path_graph_spectrum_is_exact():
+    # unit path of n vertices: λ_j = 2 - 2 cos(π j / n), j = 0..n-1 (free ends)
+    n = 40
+    L, M = _path_laplacian(np.ones(n - 1))
+    spec = smallest_eigenpairs(L, M, k=10, method="dense")
+    np.testing.assert_allclose(spec.eigenvalues, 2 - 2 * np.cos(np.pi * np.arange(10) / n), atol=1e-10)
+
+
+def test_an_operator_beyond_float32_falls_back_to_the_exact_solve():
+    # L x 1e30: its float32 copy overflows in the tridiagonal reduction (a 1e40 weight used to come
+    # back with no eigenvalue at all: IndexError); the float64 solve runs instead
+    n = 40
+    L, M = _path_laplacian(np.full(n - 1, 1e30))
+    spec = smallest_eigenpairs(L, M, k=10, method="dense")
+    np.testing.assert_allclose(spec.eigenvalues[1:] / 1e30, (2 - 2 * np.cos(np.pi * np.arange(10) / n))[1:],
+                               rtol=1e-9)
+
+
+@pytest.mark.parametrize("weight", [1e16, 1e307, np.inf, np.nan])
+def test_an_unresolvable_operator_is_a_spectrum_error_not_a_crash(weight):
+    from app.core.spectrum import SpectrumError
+
+    weights = np.ones(39)
+    weights[5] = weight
+    L, M = _path_laplacian(weights)
+    with pytest.raises(SpectrumError):
+        smallest_eigenpairs(L, M, k=10, method="dense")
