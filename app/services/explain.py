@@ -17,7 +17,7 @@ import numpy as np
 
 from app.core.explain import ShapeWords, contributions, shape_words, top_words
 from app.core.mesh import Mesh, load_mesh
-from app.core.pipeline import DescribeParams, ShapeDescription, canonical_mesh, describe
+from app.core.pipeline import DescribeParams, ShapeDescription, canonical_mesh, describe_canonical
 from app.core.vocabulary import EncodeParams, Vocabulary
 from app.services.context import ServiceContext
 from app.services.errors import ConflictError, InvalidInputError, NotFoundError
@@ -60,7 +60,10 @@ class Explanation:
 
 
 def _canonical(mesh: Mesh, params: DescribeParams) -> Geometry:
-    fine = canonical_mesh(mesh, params)
+    return _geometry(canonical_mesh(mesh, params))
+
+
+def _geometry(fine: Mesh) -> Geometry:
     # centred and turned as the thumbnails are (upright, largest silhouette facing the camera): a viewer
     # opens on the same picture as the card it came from
     v = fine.vertices.astype(np.float64)
@@ -82,7 +85,8 @@ def query_geometry(
 ) -> tuple[ShapeDescription, Geometry]:
     """An uploaded query: its description and its canonical geometry (one load, as /search loads it)."""
     mesh = load_upload(data, file_type, max_vertices)
-    return describe(mesh, params), _canonical(mesh, params)
+    fine = canonical_mesh(mesh, params)
+    return describe_canonical(fine, mesh.n_vertices, params), _geometry(fine)
 
 
 # ---- in the API process (threads) -------------------------------------------------------------------------
