@@ -24,8 +24,7 @@ from manifold3d import CrossSection, Manifold
 from scipy.spatial.transform import Rotation
 
 from app.core.mesh import Mesh, clean
-from app.storage.blobs import atomic_write
-from benchmarks.variants import _obj_text
+from benchmarks.variants import write_labelled
 
 SPREAD = 0.2  # each proportion is drawn in [1 - SPREAD, 1 + SPREAD] times its class's value
 SEGMENTS = (16, 48)  # segments around a circle: the exporter's chord tolerance
@@ -173,17 +172,8 @@ def generate(out: Path | str, classes: int = len(CLASSES), per_class: int = 12, 
     Each shape has its own stream (seed, class, index, 11): the same arguments give the same files."""
     if not 1 <= classes <= len(CLASSES):
         raise ValueError(f"classes must be between 1 and {len(CLASSES)}")
-    dest = Path(out)
-    lines = []
-    for c, name in enumerate(list(CLASSES)[:classes]):
-        (dest / name).mkdir(parents=True, exist_ok=True)
-        for i in range(per_class):
-            mesh = rigid_shape(name, np.random.default_rng([seed, c, i, 11]))
-            rel = f"{name}/{name}_{i:02d}.obj"
-            atomic_write(dest / rel, _obj_text(mesh).encode())
-            lines.append(f"{rel},{name}\n")
-    atomic_write(dest / "labels.csv", ("file,class\n" + "".join(lines)).encode())  # last: a complete folder
-    return dest
+    return write_labelled(Path(out), list(CLASSES)[:classes], per_class,
+                          lambda c, name, i: rigid_shape(name, np.random.default_rng([seed, c, i, 11])))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -32,8 +32,7 @@ from app.core.cleaning import vertex_components
 from app.core.mesh import Mesh, clean
 from app.datasets.bodyplans import PLANS
 from app.datasets.synthetic import _simplify, pose, surface
-from app.storage.blobs import atomic_write
-from benchmarks.variants import _obj_text
+from benchmarks.variants import write_labelled
 
 FINE_GRID = 200  # voxels along the longest side: ~13k-46k vertices from marching cubes
 VERTEX_RANGE = (4_000, 40_000)
@@ -86,19 +85,11 @@ def generate(out: Path | str, classes: int = 8, per_class: int = 12, seed: int =
              holes: tuple[int, int] = HOLES, noise: float = NOISE,
              vertex_range: tuple[int, int] = VERTEX_RANGE, grid: int = FINE_GRID) -> Path:
     """Write classes x per_class scan-like OBJ meshes and labels.csv under `out`; return it."""
-    names = list(PLANS)[:classes]
-    dest = Path(out)
-    lines = []
-    for c, name in enumerate(names):
-        for i in range(per_class):
-            rng = np.random.default_rng([seed, c, i, 7])  # not the synthetic corpus's instances
-            mesh = scan_shape(name, rng, grid=grid, holes=holes, noise=noise, vertex_range=vertex_range)
-            rel = f"{name}/{name}_{i:02d}.obj"
-            (dest / name).mkdir(parents=True, exist_ok=True)
-            atomic_write(dest / rel, _obj_text(mesh).encode())
-            lines.append(f"{rel},{name}\n")
-    atomic_write(dest / "labels.csv", ("file,class\n" + "".join(lines)).encode())  # last: a complete folder
-    return dest
+    def make(c: int, name: str, i: int) -> Mesh:
+        rng = np.random.default_rng([seed, c, i, 7])  # not the synthetic corpus's instances
+        return scan_shape(name, rng, grid=grid, holes=holes, noise=noise, vertex_range=vertex_range)
+
+    return write_labelled(Path(out), list(PLANS)[:classes], per_class, make)
 
 
 def main(argv: list[str] | None = None) -> int:

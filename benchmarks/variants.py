@@ -14,6 +14,7 @@ repository (var/ is ignored); the meshes are never committed.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -74,6 +75,21 @@ def _obj_text(mesh: Mesh) -> str:
     out = [f"v {x:.8g} {y:.8g} {z:.8g}\n" for x, y, z in mesh.vertices]
     out += [f"f {a} {b} {c}\n" for a, b, c in mesh.faces + 1]
     return "".join(out)
+
+
+def write_labelled(dest: Path, names: list[str], per_class: int,
+                   make: Callable[[int, str, int], Mesh]) -> Path:
+    """Write make(class index, class name, instance) as dest/<class>/<class>_NN.obj for every class and
+    instance, then labels.csv (file,class) last: a folder with labels.csv is complete. Returns dest."""
+    lines = []
+    for c, name in enumerate(names):
+        (dest / name).mkdir(parents=True, exist_ok=True)
+        for i in range(per_class):
+            rel = f"{name}/{name}_{i:02d}.obj"
+            atomic_write(dest / rel, _obj_text(make(c, name, i)).encode())
+            lines.append(f"{rel},{name}\n")
+    atomic_write(dest / "labels.csv", ("file,class\n" + "".join(lines)).encode())
+    return dest
 
 
 def main(argv: list[str] | None = None) -> int:
