@@ -62,7 +62,9 @@ def _describe_copies(entry: str, params_kwargs: dict, seed: int) -> dict | None:
 
 def scores(queries: np.ndarray, originals: np.ndarray) -> dict[str, float]:
     """Query i's own original is originals[i]. queries, originals (n, d) -> NN, MRR, top 5."""
-    d = np.abs(queries[:, None, :] - originals[None, :, :]).sum(axis=2)  # (n, n) L1
+    from app.core.vocabulary import l1_distance
+
+    d = l1_distance(queries, originals)  # (n, n)
     own = np.diagonal(d)[:, None]
     rank = 1 + (d < own).sum(axis=1)  # ties count in the copy's favour, as FAISS's order may
     return {"NN": float(np.mean(rank == 1)), "MRR": float(np.mean(1.0 / rank)),
