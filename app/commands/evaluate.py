@@ -60,9 +60,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="t_min from Weyl's law or from the computed λ_k (spectrum: the paper's; "
                    "default %(default)s)")
     p.add_argument("--smoothing", type=int, default=EvaluationOptions.smoothing,
-                   help="Taubin iterations before the eigen-solve (0: none; default %(default)s)")
+                   help="Taubin steps before the eigen-solve, λ and μ alternating (0: none; "
+                   "default %(default)s)")
     p.add_argument("--smoothing-weights", choices=WEIGHTS, default=EvaluationOptions.smoothing_weights,
-                   help="Taubin weights: cotangent (intrinsic) or uniform (default %(default)s)")
+                   help="Taubin weights: intrinsic (intrinsic Delaunay cotangent), cotangent (extrinsic, "
+                   "clipped at 0) or uniform (default %(default)s)")
     p.add_argument("--fill-holes", type=float, default=EvaluationOptions.fill_holes, metavar="F",
                    help="close holes whose cap adds at most F of the area (0: none; default %(default)s)")
     p.add_argument("--laplacian", choices=LAPLACIANS, default=EvaluationOptions.laplacian,

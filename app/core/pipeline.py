@@ -19,8 +19,8 @@ from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import LAPLACIANS, laplacian
 from app.core.mesh import InvalidMeshError, Mesh
 from app.core.remeshing import isotropic_remesh
-from app.core.resolution import SUBDIVISIONS, normalize_scale, smooth, to_resolution
-from app.core.smoothing import WEIGHTS, cotangent_taubin
+from app.core.resolution import SUBDIVISIONS, normalize_scale, to_resolution
+from app.core.smoothing import WEIGHTS, taubin
 from app.core.spectrum import SpectrumError, smallest_eigenpairs
 
 DESCRIPTION_FORMAT = 1
@@ -37,14 +37,16 @@ class DescribeParams:
     # smoothed (docs/results.md)
     time_range: str = "spectrum"
     target_vertices: int = 1000  # canonical resolution; 0 keeps the input resolution
-    # Taubin λ|μ iterations at the canonical resolution; 0 = none. 10 with the intrinsic Laplacian:
-    # within 0.7 points of clean on SHREC'11's triangulation variant and 1.5 under noise (fused),
-    # where 40 (the old default) costs 2.0 and 2.6 points on smooth shapes (synthetic corpus); a
-    # quarter of the smoothing that cost 6-8 points on decimated scans (docs/results.md, "Intrinsic
-    # Laplacian")
+    # Taubin steps (λ, μ, λ ...: 10 = 5 pairs) at the canonical resolution; 0 = none. 10 with the
+    # intrinsic Laplacian: within 0.7 points of clean on SHREC'11's triangulation variant and 1.5
+    # under noise (fused), where 40 (the old default) costs 2.0 and 2.6 points on smooth shapes
+    # (synthetic corpus); a quarter of the smoothing that cost 6-8 points on decimated scans
+    # (docs/results.md, "Intrinsic Laplacian")
     smoothing: int = 10
-    # uniform (resolution.smooth) or cotangent (app.core.smoothing). Cotangent weights lose 23 and 5
-    # points on the triangulation and noise variants where uniform weights hold (docs/results.md)
+    # uniform, intrinsic or cotangent Taubin weights (app.core.smoothing). The surface's own weights
+    # do not even out a triangulation as uniform ones do: intrinsic weights at the same 10 steps lose
+    # 21.7 points pure (5.0 fused, NN 0.947) on SHREC'11's triangulation variant and 14.5 (6.0) on noisy
+    # synthetic shapes, while they gain 2.7 on the rigid column (docs/results.md, round 10)
     smoothing_weights: str = "uniform"
     # intrinsic (cotangent weights of the intrinsic Delaunay triangulation: the same operator on a
     # Delaunay mesh, far less dependent on the triangulation elsewhere) | cotangent (the paper's)
@@ -158,8 +160,7 @@ def describe_canonical(fine: Mesh, input_vertices: int, params: DescribeParams) 
 def _from_canonical(fine: Mesh, input_vertices: int, params: DescribeParams,
                     filters: Sequence[KeypointFilter], clock: _Clock) -> list[ShapeDescription]:
     # resampling and smoothing are scale-free: one normalisation, after them, gives unit area
-    smoothed = (cotangent_taubin(fine, params.smoothing) if params.smoothing_weights == "cotangent"
-                else smooth(fine, params.smoothing))
+    smoothed = taubin(fine, params.smoothing, params.smoothing_weights)
     # remeshing after smoothing: an even sampling of a noisy surface spends its vertices on the
     # noise's extra area (SHREC'11 noise variant: -23 points when remeshed first)
     if params.remesh:

@@ -184,20 +184,3 @@ def perturb(mesh: Mesh, noise_to_signal: float, seed: int = 0) -> Mesh:
     rng = np.random.default_rng(seed)
     sigma = np.sqrt(noise_to_signal * mesh.vertices.var(axis=0))
     return Mesh(mesh.vertices + rng.normal(size=mesh.vertices.shape) * sigma, mesh.faces)
-
-
-def smooth(mesh: Mesh, iterations: int) -> Mesh:
-    """Taubin λ|μ smoothing (λ = 0.5, μ = -0.53): a low-pass filter that, unlike plain Laplacian
-    smoothing, does not shrink the shape.
-
-    Run at the canonical resolution before the eigen-solve, it removes vertex noise (which inflates
-    the high eigenvalues and the small-time HKS) and leaves the shape's large-scale geometry alone.
-    Uniform weights: linear in the coordinates, so it commutes with rotation, translation, scale and
-    vertex order.
-    """
-    if iterations <= 0:
-        return mesh
-    tm = trimesh.Trimesh(mesh.vertices.copy(), mesh.faces, process=False)
-    trimesh.smoothing.filter_taubin(tm, lamb=0.5, nu=0.53, iterations=iterations)
-    return Mesh(np.asarray(tm.vertices, dtype=np.float64), mesh.faces)
-

@@ -1,38 +1,55 @@
-"""Intrinsic smoothing: Taubin's λ|μ filter with cotangent weights.
+"""Taubin λ|μ smoothing with the surface's own weights (the default) or the mesh's.
 
-Uniform-weight Taubin smoothing (resolution.smooth) averages a vertex with its neighbours by count: on
-an irregular, decimated mesh it moves vertices along the surface and distorts the shape (it cost 6
-points of mAP on decimated scans, issue 11). Here each neighbour counts by the cotangent weight of
-the shared edge, the discrete Laplace–Beltrami operator of the surface: the filter depends on the
-geometry, not on how many edges meet at a vertex. It keeps Taubin's band-pass (a shrinking λ step, an
-inflating μ step: low frequencies pass, vertex noise does not). The weights are scale-free and the
-update is linear in the coordinates, so it commutes with rotation, translation, uniform scale and
-vertex order. On a flat patch whose edges are Delaunay every weight is positive and a linear function
-is reproduced exactly: the interior of a plane does not move.
+Taubin's filter alternates a shrinking step x <- x + λ (W x - x) and an inflating one with μ < 0, W a
+row-stochastic averaging of each vertex's neighbours: low frequencies pass, vertex noise does not, and
+the shape does not shrink as plain Laplacian smoothing does. What W is decides what the filter sees:
 
-An option (DescribeParams.smoothing_weights="cotangent"), not the default: on SHREC'11's triangulation
-and noise variants it recovered 8 of the 31 and 1.2 of the 6.2 points that dropping smoothing costs,
-where uniform Taubin recovers all of them (docs/results.md, "Defaults across datasets").
+- "intrinsic" (the default): the cotangent weights of the intrinsic Delaunay triangulation of the same
+  surface (laplacian.intrinsic_delaunay_laplacian), all ≥ 0. They are a property of the surface's
+  metric, not of how its vertices are connected: a linear function is its own average, so the
+  interior of a flat patch does not move whatever its triangulation, and a vertex moves by the
+  surface's curvature, not by the count of its neighbours.
+- "cotangent": the extrinsic cotangent weights, negative ones (non-Delaunay edges) clipped to 0.
+  On the long thin triangles of a decimated mesh most weights are clipped, and the clipped filter no
+  longer reproduces a plane.
+- "uniform": each neighbour by 1 (trimesh.smoothing.filter_taubin). It depends on the triangulation:
+  on an irregular mesh it slides vertices along the surface towards their neighbours' centroid and
+  changes the shape by where the vertices were (issue 11).
+
+`steps` counts single steps, λ then μ then λ ..., for every weighting (trimesh's convention): 10 steps
+are 5 λ|μ pairs. (Until round 10 the cotangent filter counted pairs, so "cotangent Taubin 10" ran
+twice the smoothing of "uniform Taubin 10"; docs/results.md, round 10.) The weights are computed once,
+from the input, and are scale-free; the update is linear in the coordinates, so every weighting
+commutes with rotation, translation, uniform scale and vertex order.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+import trimesh
 
-from app.core.laplacian import cotangent_laplacian
+from app.core.laplacian import cotangent_laplacian, intrinsic_delaunay_laplacian
 from app.core.mesh import Mesh
 
-WEIGHTS = ("cotangent", "uniform")
+WEIGHTS = ("intrinsic", "cotangent", "uniform")
+LAMBDA, MU = 0.5, -0.53  # Taubin's pass band: k_PB = 1/λ + 1/μ ≈ 0.11
 
 
-def cotangent_weights(mesh: Mesh) -> tuple[sp.csr_matrix, np.ndarray]:
-    """(n, n) row-stochastic averaging operator W and (n,) bool "has neighbours".
+def averaging_operator(mesh: Mesh, weights: str) -> tuple[sp.csr_matrix, np.ndarray]:
+    """(n, n) row-stochastic averaging operator W and (n,) bool "has neighbours" (a vertex without a
+    positive weight keeps its position).
 
-    W_ij ∝ max(cot α_ij + cot β_ij, 0): a non-Delaunay edge (negative weight) would push a vertex
-    away from its neighbour, so it is left out; a vertex with no positive weight keeps its position.
+    W_ij ∝ max(-L_ij, 0) for the named Laplacian L, "intrinsic" or "cotangent" (the intrinsic one has
+    no negative weight to clip; a negative extrinsic weight would push a vertex away from its
+    neighbour). The uniform filter is trimesh's (taubin).
     """
-    stiffness, _ = cotangent_laplacian(mesh.vertices, mesh.faces)
+    if weights == "intrinsic":
+        stiffness, _ = intrinsic_delaunay_laplacian(mesh.vertices, mesh.faces)
+    elif weights == "cotangent":
+        stiffness, _ = cotangent_laplacian(mesh.vertices, mesh.faces)
+    else:
+        raise ValueError(f"weights must be intrinsic or cotangent, not {weights!r}")
     w = (-stiffness).tocsr()
     w.setdiag(0)
     w.data = np.maximum(w.data, 0.0)
@@ -42,14 +59,21 @@ def cotangent_weights(mesh: Mesh) -> tuple[sp.csr_matrix, np.ndarray]:
     return (sp.diags(np.where(has, 1.0 / np.where(has, rows, 1.0), 0.0)) @ w).tocsr(), has
 
 
-def cotangent_taubin(mesh: Mesh, iterations: int, lamb: float = 0.5, mu: float = -0.53) -> Mesh:
-    """`iterations` λ|μ pairs: x <- x + s (W x - x), s = λ then μ; W from the input geometry.
-    vertices (n, 3) move, faces (f, 3) are kept."""
-    if iterations <= 0:
+def taubin(mesh: Mesh, steps: int, weights: str = "intrinsic") -> Mesh:
+    """`steps` alternating λ and μ steps x <- x + s (W x - x), W = averaging_operator(mesh, weights)
+    from the input geometry. vertices (n, 3) move, faces (f, 3) are kept; 0 steps returns `mesh`."""
+    if weights not in WEIGHTS:
+        raise ValueError(f"weights must be one of {', '.join(WEIGHTS)}, not {weights!r}")
+    if steps <= 0:
         return mesh
-    w, has = cotangent_weights(mesh)
+    if weights == "uniform":  # the library's filter: the descriptions of rounds 1-9 exactly
+        tm = trimesh.Trimesh(mesh.vertices.copy(), mesh.faces, process=False)
+        trimesh.smoothing.filter_taubin(tm, lamb=LAMBDA, nu=-MU, iterations=steps)
+        return Mesh(np.asarray(tm.vertices, dtype=np.float64), mesh.faces)
+    w, has = averaging_operator(mesh, weights)
     x = mesh.vertices.copy()
-    for _ in range(iterations):
-        for step in (lamb, mu):
-            x = x + step * np.where(has[:, None], w @ x - x, 0.0)  # (n, 3)
+    for step in range(steps):
+        s = LAMBDA if step % 2 == 0 else MU
+        x = x + s * np.where(has[:, None], w @ x - x, 0.0)  # (n, 3)
     return Mesh(x, mesh.faces)
+

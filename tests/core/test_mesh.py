@@ -120,7 +120,10 @@ def test_loop_subdivision_shrinks_a_coarse_mesh_which_is_why_midpoint_is_the_def
 
 
 def test_taubin_smoothing_removes_noise_without_shrinking(random_rotation):
-    from app.core.resolution import smooth
+    from app.core.smoothing import taubin
+
+    def smooth(mesh: Mesh, steps: int) -> Mesh:
+        return taubin(mesh, steps, "uniform")
 
     sphere = trimesh.creation.icosphere(subdivisions=3)
     rng = np.random.default_rng(0)

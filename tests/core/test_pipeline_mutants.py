@@ -20,13 +20,13 @@ from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import laplacian
 from app.core.mesh import Mesh
 from app.core.pipeline import DESCRIPTION_FORMAT, DescribeParams, ShapeDescription, describe, describe_filters
-from app.core.resolution import normalize_scale, smooth, to_resolution
-from app.core.smoothing import WEIGHTS, cotangent_taubin
+from app.core.resolution import normalize_scale, to_resolution
+from app.core.smoothing import WEIGHTS, taubin
 from app.core.spectrum import smallest_eigenpairs
 
 # 162 vertices after one subdivision: 42 * 1.5 < 120 <= 162 <= 120 * 1.5, so to_resolution neither
 # subdivides twice nor decimates
-SMALL = DescribeParams(k=12, m=6, target_vertices=120, smoothing=3)
+SMALL = DescribeParams(k=12, m=6, target_vertices=120, smoothing=3, smoothing_weights="uniform")
 STAGES = ["resample", "laplacian", "eigen", "hks", "keypoints"]
 
 
@@ -44,8 +44,7 @@ def by_stages(mesh: Mesh, p: DescribeParams, flt: KeypointFilter | None = None) 
     """The stages of describe run by hand, in the order the module documents (resolution, Taubin,
     unit area, Laplacian, eigenpairs, HKS, keypoints): describe must equal this for any parameters."""
     fine = to_resolution(mesh, p.target_vertices, subdivision=p.subdivision)
-    smoothed = (cotangent_taubin(fine, p.smoothing) if p.smoothing_weights == "cotangent"
-                else smooth(fine, p.smoothing))
+    smoothed = taubin(fine, p.smoothing, p.smoothing_weights)
     work = normalize_scale(smoothed)
     stiffness, mass = laplacian(work.vertices, work.faces, p.laplacian)
     spectrum = smallest_eigenpairs(stiffness, mass, p.k, method=p.solver)
@@ -69,6 +68,7 @@ def same(a: ShapeDescription, b: ShapeDescription) -> bool:
     {},
     {"laplacian": "cotangent"},
     {"smoothing_weights": "cotangent"},
+    {"smoothing_weights": "intrinsic"},
     {"smoothing": 0},
     {"subdivision": "loop"},
     {"time_range": "weyl"},
@@ -90,8 +90,9 @@ def test_the_parameters_of_small_each_change_the_description():
     base = by_stages(CIGAR, SMALL)
     for change in ({"laplacian": "intrinsic"}, {"smoothing_weights": "uniform"}, {"subdivision": "midpoint"}):
         assert same(base, by_stages(CIGAR, dataclasses.replace(SMALL, **change)))  # SMALL's own values
-    for change in ({"laplacian": "cotangent"}, {"smoothing_weights": "cotangent"}, {"subdivision": "loop"},
-                   {"time_range": "weyl"}, {"smoothing": 0}):
+    for change in ({"laplacian": "cotangent"}, {"smoothing_weights": "cotangent"},
+                   {"smoothing_weights": "intrinsic"}, {"subdivision": "loop"}, {"time_range": "weyl"},
+                   {"smoothing": 0}):
         other = by_stages(CIGAR, dataclasses.replace(SMALL, **change))
         assert np.abs(other.hks - base.hks).max() > 1e-4, change
 
@@ -153,7 +154,8 @@ def test_remeshing_runs_on_the_smoothed_mesh_at_the_target_when_asked(monkeypatc
     got = describe(CIGAR, dataclasses.replace(SMALL, remesh=True))
     (mesh, target), = seen
     assert target == 120
-    assert np.array_equal(mesh.vertices, smooth(to_resolution(CIGAR, 120), 3).vertices)  # smoothed first
+    smoothed = taubin(to_resolution(CIGAR, 120), 3, "uniform")
+    assert np.array_equal(mesh.vertices, smoothed.vertices)  # smoothed first
     assert got.n_vertices == replacement.n_vertices == 162
     assert got.input_vertices == 42
     unit = normalize_scale(replacement)
@@ -286,7 +288,7 @@ def test_unknown_choices_are_refused_in_words(field, value, message):
 
 def test_every_known_choice_is_accepted():
     for sub in ("midpoint", "loop"):
-        for weights in ("cotangent", "uniform"):
+        for weights in ("intrinsic", "cotangent", "uniform"):
             for lap in ("cotangent", "intrinsic"):
                 for tr in ("weyl", "spectrum"):
                     p = DescribeParams(subdivision=sub, smoothing_weights=weights, laplacian=lap,

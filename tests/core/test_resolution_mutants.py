@@ -13,6 +13,7 @@ import pytest
 
 from app.core import resolution
 from app.core.meshdata import InvalidMeshError, Mesh
+from app.core.smoothing import taubin
 
 TETRA_V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
 
@@ -187,10 +188,10 @@ def test_smoothing_keeps_every_vertex_even_a_duplicate():
     # a seam's duplicate vertex (4 = 0): not welded, the faces still index the result
     v = np.vstack([TETRA_V, TETRA_V[:1]])
     f = np.array([[0, 2, 1], [0, 1, 3], [4, 3, 2], [1, 2, 3]], np.int64)
-    out = resolution.smooth(Mesh(v, f), 3)
+    out = taubin(Mesh(v, f), 3, "uniform")
     assert out.n_vertices == 5
     np.testing.assert_array_equal(out.faces, f)
-    assert resolution.smooth(Mesh(v, f), 0).vertices is v
+    assert taubin(Mesh(v, f), 0, "uniform").vertices is v
 
 
 def test_taubin_steps_on_a_tetrahedron_scale_the_offsets_from_the_centroid():
@@ -199,9 +200,9 @@ def test_taubin_steps_on_a_tetrahedron_scale_the_offsets_from_the_centroid():
     v = TETRA_V * [1.0, 2.0, 3.0] + [1.0, -2.0, 0.5]
     f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
     centre = v.mean(0)
-    one = resolution.smooth(Mesh(v, f), 1)
+    one = taubin(Mesh(v, f), 1, "uniform")
     np.testing.assert_allclose(one.vertices - centre, (v - centre) * (1 - 4 * 0.5 / 3), atol=1e-12)
-    two = resolution.smooth(Mesh(v, f), 2)
+    two = taubin(Mesh(v, f), 2, "uniform")
     factor = (1 - 4 * 0.5 / 3) * (1 + 4 * 0.53 / 3)
     np.testing.assert_allclose(two.vertices - centre, (v - centre) * factor, atol=1e-12)
 

@@ -1,13 +1,14 @@
-"""Intrinsic smoothing (Taubin λ|μ with cotangent weights): its mathematics."""
+"""Taubin λ|μ smoothing (app.core.smoothing): its mathematics, for each weighting."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import trimesh
+from scipy.spatial import Delaunay
 
 from app.core.mesh import Mesh
-from app.core.resolution import smooth as uniform_taubin
-from app.core.smoothing import cotangent_taubin, cotangent_weights
+from app.core.smoothing import LAMBDA, MU, WEIGHTS, averaging_operator, taubin
 
 
 def _mesh(tm: trimesh.Trimesh) -> Mesh:
@@ -18,64 +19,106 @@ def _sphere(subdivisions: int = 3) -> Mesh:
     return _mesh(trimesh.creation.icosphere(subdivisions=subdivisions))
 
 
-def test_zero_iterations_is_the_identity():
+def _skewed_plane(rotation: np.ndarray) -> tuple[Mesh, np.ndarray]:
+    """A tilted unit square whose triangulation is not Delaunay (the Delaunay triangulation of a copy
+    stretched 6x along y: long triangles, 440 negative extrinsic cotangent weights), and its vertices
+    in the middle (0.3 < x, y < 0.7), far from the boundary, which moves."""
+    rng = np.random.default_rng(0)
+    xy = np.vstack([rng.random((300, 2)), [[0, 0], [1, 0], [0, 1], [1, 1]]])
+    faces = Delaunay(xy * [1.0, 6.0]).simplices.astype(np.int64)
+    plane = Mesh(np.column_stack([xy, np.zeros(len(xy))]) @ rotation.T, faces)
+    return plane, np.where((np.abs(xy - 0.5) < 0.2).all(axis=1))[0]
+
+
+@pytest.mark.parametrize("weights", WEIGHTS)
+def test_zero_steps_is_the_identity(weights):
     sphere = _sphere()
-    assert cotangent_taubin(sphere, 0) is sphere
+    assert taubin(sphere, 0, weights) is sphere
 
 
-def test_weights_average_the_neighbours():
-    w, has = cotangent_weights(_sphere(2))
+def test_an_unknown_weighting_is_refused():
+    with pytest.raises(ValueError, match="intrinsic, cotangent, uniform"):
+        taubin(_sphere(1), 2, "laplace")
+    with pytest.raises(ValueError, match="intrinsic or cotangent"):
+        averaging_operator(_sphere(1), "uniform")
+
+
+@pytest.mark.parametrize("weights", ["intrinsic", "cotangent"])
+def test_weights_average_the_neighbours(weights):
+    w, has = averaging_operator(_sphere(2), weights)
     assert has.all()
     assert np.allclose(np.asarray(w.sum(axis=1)).ravel(), 1.0) and w.data.min() > 0
     assert w.diagonal().max() == 0
 
 
-def test_the_interior_of_a_flat_patch_does_not_move(random_rotation):
-    # a planar Delaunay triangulation: every cotangent weight is positive, and a linear function is
-    # its own cotangent average, so the filter moves no vertex whose neighbourhood is flat and complete
-    rng = np.random.default_rng(0)
-    xy = np.vstack([rng.random((200, 2)), [[0, 0], [1, 0], [0, 1], [1, 1]]])
-    from scipy.spatial import Delaunay
-
-    faces = Delaunay(xy).simplices.astype(np.int64)
-    rot = random_rotation(7)  # a tilted plane, isometric to the Delaunay one (same angles)
-    plane = Mesh(np.column_stack([xy, np.zeros(len(xy))]) @ rot.T, faces)
-    out = cotangent_taubin(plane, 1)  # one λ|μ pair reaches two rings
-    tm = trimesh.Trimesh(plane.vertices, plane.faces, process=False)
-    edges = np.sort(tm.edges, axis=1)
-    unique, counts = np.unique(edges, axis=0, return_counts=True)
-    near = set(np.unique(unique[counts == 1]).tolist())  # boundary edges belong to one face
-    for _ in range(2):  # the boundary (which moves: it has neighbours on one side) and its two rings
-        near |= {int(j) for i in near for j in tm.vertex_neighbors[i]}
-    far = np.setdiff1d(np.arange(plane.n_vertices), sorted(near))
-    assert far.size > 50
-    assert np.abs(out.vertices[far] - plane.vertices[far]).max() < 1e-12
-    # every vertex, boundary included, stays on the plane: no motion off a flat surface
-    many = cotangent_taubin(plane, 20).vertices
-    assert np.abs(many @ rot[:, 2]).max() < 1e-12  # the plane's normal is the rotated z axis
+@pytest.mark.parametrize("weights", ["intrinsic", "cotangent"])
+def test_steps_alternate_lambda_and_mu(weights):
+    # `steps` counts single steps (trimesh's convention): 1 is a λ step, 2 a λ step then a μ step
+    rng = np.random.default_rng(2)
+    base = _sphere(2)
+    mesh = Mesh(base.vertices + 0.05 * rng.normal(size=base.vertices.shape), base.faces)
+    w, _ = averaging_operator(mesh, weights)
+    x = mesh.vertices
+    one = x + LAMBDA * (w @ x - x)
+    two = one + MU * (w @ one - one)
+    assert np.allclose(taubin(mesh, 1, weights).vertices, one, atol=1e-14)
+    assert np.allclose(taubin(mesh, 2, weights).vertices, two, atol=1e-14)
 
 
-def test_a_sphere_stays_a_sphere_of_almost_the_same_size():
-    out = cotangent_taubin(_sphere(), 40)
+def test_uniform_steps_are_trimesh_filter_taubin():
+    rng = np.random.default_rng(5)
+    base = _sphere(2)
+    mesh = Mesh(base.vertices + 0.05 * rng.normal(size=base.vertices.shape), base.faces)
+    tm = trimesh.Trimesh(mesh.vertices.copy(), mesh.faces, process=False)
+    trimesh.smoothing.filter_taubin(tm, lamb=0.5, nu=0.53, iterations=7)
+    np.testing.assert_array_equal(taubin(mesh, 7, "uniform").vertices, tm.vertices)
+
+
+def test_the_middle_of_a_flat_patch_stays_put_only_with_intrinsic_weights(random_rotation):
+    # A linear function is its own average under the cotangent weights of any planar triangulation in
+    # which they are all ≥ 0: the intrinsic Delaunay one (flips keep a plane a plane). The extrinsic
+    # weights of a non-Delaunay triangulation are clipped (the clipped average is not linear-exact),
+    # and uniform weights slide each vertex towards its neighbours' centroid: both move the middle
+    rot = random_rotation(7)
+    plane, middle = _skewed_plane(rot)
+    assert middle.size > 40
+    edge = 0.11  # the mean edge length of this triangulation
+
+    def motion(weights: str, steps: int) -> float:
+        return float(np.abs(taubin(plane, steps, weights).vertices[middle] - plane.vertices[middle]).max())
+
+    for steps in (1, 2, 10):
+        assert motion("intrinsic", steps) < 1e-3 * edge  # robust-laplacian's mollification: ~1e-6
+        assert motion("cotangent", steps) > 0.05 * edge
+        assert motion("uniform", steps) > 0.2 * edge
+    for weights in WEIGHTS:  # and nothing leaves the plane, the boundary included
+        assert np.abs(taubin(plane, 10, weights).vertices @ rot[:, 2]).max() < 1e-12
+
+
+@pytest.mark.parametrize("weights", WEIGHTS)
+def test_a_sphere_stays_a_sphere_of_almost_the_same_size(weights):
+    out = taubin(_sphere(), 40, weights)
     radii = np.linalg.norm(out.vertices, axis=1)
     assert radii.std() / radii.mean() < 2e-3
     assert 1.0 - radii.mean() < 0.01  # Taubin's μ step undoes the λ step's shrinkage: < 1 %
 
 
-def test_commutes_with_rigid_motion_scale_and_vertex_order(random_rotation):
+@pytest.mark.parametrize("weights", WEIGHTS)
+def test_commutes_with_rigid_motion_scale_and_vertex_order(random_rotation, weights):
     rng = np.random.default_rng(1)
     base = _sphere(2)
     noisy = Mesh(base.vertices * [1.0, 0.7, 1.6] + 0.02 * rng.normal(size=base.vertices.shape), base.faces)
-    out = cotangent_taubin(noisy, 20).vertices
+    out = taubin(noisy, 20, weights).vertices
     rot, shift, scale = random_rotation(4), np.array([3.0, -1.0, 5.0]), 7.5
-    moved = cotangent_taubin(Mesh(scale * noisy.vertices @ rot.T + shift, noisy.faces), 20).vertices
-    assert np.allclose(moved, scale * out @ rot.T + shift, atol=1e-9 * scale)
+    moved = taubin(Mesh(scale * noisy.vertices @ rot.T + shift, noisy.faces), 20, weights).vertices
+    assert np.allclose(moved, scale * out @ rot.T + shift, atol=1e-8 * scale)
     perm = rng.permutation(noisy.n_vertices)
-    shuffled = cotangent_taubin(Mesh(noisy.vertices[perm], np.argsort(perm)[noisy.faces]), 20)
-    assert np.allclose(shuffled.vertices, out[perm], atol=1e-12)
+    shuffled = taubin(Mesh(noisy.vertices[perm], np.argsort(perm)[noisy.faces]), 20, weights)
+    assert np.allclose(shuffled.vertices, out[perm], atol=1e-10)
 
 
-def test_it_removes_vertex_noise():
+@pytest.mark.parametrize("weights", WEIGHTS)
+def test_it_removes_vertex_noise(weights):
     rng = np.random.default_rng(0)
     sphere = _sphere(4)  # 2562 vertices
     noisy = Mesh(sphere.vertices * (1.0 + 0.01 * rng.normal(size=(sphere.n_vertices, 1))), sphere.faces)
@@ -84,13 +127,14 @@ def test_it_removes_vertex_noise():
         r = np.linalg.norm(m.vertices, axis=1)
         return float(r.std() / r.mean())
 
-    assert radial_spread(cotangent_taubin(noisy, 20)) < 0.4 * radial_spread(noisy)
+    assert radial_spread(taubin(noisy, 20, weights)) < 0.5 * radial_spread(noisy)
 
 
-def test_it_moves_an_irregular_triangulation_less_along_the_surface():
+@pytest.mark.parametrize("weights", ["intrinsic", "cotangent"])
+def test_it_moves_an_irregular_triangulation_less_along_the_surface(weights):
     # the same sphere, vertices slid along it at random: an irregular triangulation. Uniform weights
     # pull each vertex towards the centroid of its neighbours, regularising the sampling (motion
-    # along the surface: a change of shape once the mesh is re-sampled); cotangent weights see a
+    # along the surface: a change of shape once the mesh is re-sampled); the surface's weights see a
     # sphere and move each vertex mostly along its normal
     rng = np.random.default_rng(3)
     sphere = _sphere(3)
@@ -103,4 +147,5 @@ def test_it_moves_an_irregular_triangulation_less_along_the_surface():
         b = out.vertices / np.linalg.norm(out.vertices, axis=1, keepdims=True)
         return float(np.arccos(np.clip((a * b).sum(axis=1), -1, 1)).mean())
 
-    assert slide(cotangent_taubin(mesh, 40)) < 0.5 * slide(uniform_taubin(mesh, 40))
+    assert slide(taubin(mesh, 40, weights)) < 0.5 * slide(taubin(mesh, 40, "uniform"))
+
