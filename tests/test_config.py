@@ -24,6 +24,15 @@ def test_smoothing_weights_and_time_range_reach_the_core(monkeypatch):
     assert params.fingerprint() != DescribeParams().fingerprint()  # cached descriptions are not reused
 
 
+@pytest.mark.parametrize("weights", ["intrinsic", "cotangent", "uniform"])
+def test_every_smoothing_weighting_is_accepted_from_the_environment(monkeypatch, weights):
+    from app.core.smoothing import WEIGHTS
+
+    monkeypatch.setenv("SHAPEBAG_DESCRIBE__SMOOTHING_WEIGHTS", weights)
+    assert Settings().describe.params().smoothing_weights == weights
+    assert weights in WEIGHTS  # the settings and the core list the same weightings
+
+
 @pytest.mark.parametrize("name", ["SMOOTHING_WEIGHTS", "TIME_RANGE"])
 def test_unknown_values_are_refused_at_start(monkeypatch, name):
     monkeypatch.setenv(f"SHAPEBAG_DESCRIBE__{name}", "bogus")
