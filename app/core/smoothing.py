@@ -1,10 +1,10 @@
-"""Taubin λ|μ smoothing with the surface's own weights (the default) or the mesh's.
+"""Taubin λ|μ smoothing with the mesh's uniform weights (the default) or the surface's own.
 
 Taubin's filter alternates a shrinking step x <- x + λ (W x - x) and an inflating one with μ < 0, W a
 row-stochastic averaging of each vertex's neighbours: low frequencies pass, vertex noise does not, and
 the shape does not shrink as plain Laplacian smoothing does. What W is decides what the filter sees:
 
-- "intrinsic" (the default): the cotangent weights of the intrinsic Delaunay triangulation of the same
+- "intrinsic": the cotangent weights of the intrinsic Delaunay triangulation of the same
   surface (laplacian.intrinsic_delaunay_laplacian), all ≥ 0. They are a property of the surface's
   metric, not of how its vertices are connected: a linear function is its own average, so the
   interior of a flat patch does not move whatever its triangulation, and a vertex moves by the
@@ -12,9 +12,11 @@ the shape does not shrink as plain Laplacian smoothing does. What W is decides w
 - "cotangent": the extrinsic cotangent weights, negative ones (non-Delaunay edges) clipped to 0.
   On the long thin triangles of a decimated mesh most weights are clipped, and the clipped filter no
   longer reproduces a plane.
-- "uniform": each neighbour by 1 (trimesh.smoothing.filter_taubin). It depends on the triangulation:
-  on an irregular mesh it slides vertices along the surface towards their neighbours' centroid and
-  changes the shape by where the vertices were (issue 11).
+- "uniform" (DescribeParams' default): each neighbour by 1 (trimesh.smoothing.filter_taubin). It
+  depends on the triangulation: on an irregular mesh it slides vertices along the surface towards
+  their neighbours' centroid and changes the shape by where the vertices were (issue 11). That slide
+  is also why it wins where the others lose: two triangulations of one surface come out more alike
+  (docs/results.md, round 10).
 
 `steps` counts single steps, λ then μ then λ ..., for every weighting (trimesh's convention): 10 steps
 are 5 λ|μ pairs. (Until round 10 the cotangent filter counted pairs, so "cotangent Taubin 10" ran
@@ -59,7 +61,7 @@ def averaging_operator(mesh: Mesh, weights: str) -> tuple[sp.csr_matrix, np.ndar
     return (sp.diags(np.where(has, 1.0 / np.where(has, rows, 1.0), 0.0)) @ w).tocsr(), has
 
 
-def taubin(mesh: Mesh, steps: int, weights: str = "intrinsic") -> Mesh:
+def taubin(mesh: Mesh, steps: int, weights: str) -> Mesh:
     """`steps` alternating λ and μ steps x <- x + s (W x - x), W = averaging_operator(mesh, weights)
     from the input geometry. vertices (n, 3) move, faces (f, 3) are kept; 0 steps returns `mesh`."""
     if weights not in WEIGHTS:
@@ -76,4 +78,3 @@ def taubin(mesh: Mesh, steps: int, weights: str = "intrinsic") -> Mesh:
         s = LAMBDA if step % 2 == 0 else MU
         x = x + s * np.where(has[:, None], w @ x - x, 0.0)  # (n, 3)
     return Mesh(x, mesh.faces)
-
