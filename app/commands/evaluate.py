@@ -89,7 +89,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", type=int, default=1, metavar="N",
                    help="average BoF lines over N k-means seeds (seed, seed+1, ...) and show their spread")
     p.add_argument("--per-class", action="store_true",
-                   help="also print, per BoF row, the classes below 99.5 %% mAP and who intrudes into them")
+                   help="also print, per BoF line (noisy and --queries lines too), the classes below "
+                        "99.5 %% mAP and who intrudes into them")
     p.add_argument("--workers", type=int, default=2, help="describing processes (default 2)")
     p.add_argument("--cache-dir", type=Path, default=DEFAULT_CACHE, help=f"default {DEFAULT_CACHE}")
     p.add_argument("--json", type=Path, metavar="OUT", help="write the table and settings as JSON")

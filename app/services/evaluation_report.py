@@ -96,12 +96,13 @@ def format_table(result: EvaluationResult) -> str:
 
 
 def format_losses(result: EvaluationResult, below: float = 0.995, intruders: int = 4) -> list[str]:
-    """For each clean BoF row: the classes under `below` mAP, worst first, and who intrudes into their
-    first tier (counted over the class's queries, summed over seeds)."""
+    """For each BoF line (clean, and its noisy or other-folder queries): the classes under `below`
+    mAP, worst first, and who intrudes into their first tier (counted over the class's queries,
+    summed over seeds)."""
     out = []
     for r in result.rows:
         breakdown = r.details.get("per_class")
-        if r.kind != "bof" or r.reference is not None or not breakdown:
+        if r.kind != "bof" or not breakdown:
             continue
         weak = sorted((c for c, v in breakdown.items() if v["mAP"] < below),
                       key=lambda c: breakdown[c]["mAP"])

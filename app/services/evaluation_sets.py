@@ -62,14 +62,25 @@ def cross_scores(
     distances    : (q, N), row = query, column = database shape
     query_labels : (q,); labels : (N,)
     pairs        : (q,) database counterpart of each query, left out of its ranking, or all -1
-    -> (mean scores, per-class {"mAP"}), relevant = database shapes of the query's class
+    -> (mean scores, per-class {"mAP", "intruders"}), relevant = database shapes of the query's class;
+       a class's intruders are the other classes in its queries' first tiers (each query's first
+       R results, R = its relevant shapes), most frequent first, as metrics.class_breakdown counts them
     """
     q, n = distances.shape
     order = np.argsort(distances, axis=1, kind="stable")  # (q, N), ties by index
     if np.all(pairs >= 0):
         order = order[order != pairs[:, None]].reshape(q, n - 1)
-    per_query = metrics.relevance_scores(labels[order] == query_labels[:, None])
+    ranked = labels[order]  # (q, L) class of each result
+    relevant = ranked == query_labels[:, None]
+    per_query = metrics.relevance_scores(relevant)
     ap = per_query["mAP"]
-    per_class = {str(c): {"mAP": float(np.nanmean(ap[query_labels == c])), "intruders": {}}
-                 for c in sorted(set(query_labels.tolist()))}
+    tiers = relevant.sum(axis=1)  # (q,) R of each query
+    per_class = {}
+    for c in sorted(set(query_labels.tolist())):
+        members = np.flatnonzero(query_labels == c)
+        found = np.concatenate([ranked[i, : tiers[i]] for i in members])
+        names, counts = np.unique(found[found != c], return_counts=True)
+        intruders = sorted(zip(names.tolist(), counts.tolist(), strict=True), key=lambda nc: (-nc[1], nc[0]))
+        per_class[str(c)] = {"mAP": float(np.nanmean(ap[members])),
+                             "intruders": {str(o): int(k) for o, k in intruders}}
     return metrics.mean_scores(per_query), per_class

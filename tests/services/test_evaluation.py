@@ -280,7 +280,8 @@ def test_per_class_breakdown_is_in_the_json_and_printed_on_request(folder: Path,
     assert np.mean([v["mAP"] for v in breakdown.values()]) == pytest.approx(main.scores["mAP"])
     assert all(other != cls for cls, v in breakdown.items() for other in v["intruders"])
     table = format_table(result)
-    assert "classes below 99.5 % mAP" in table
+    assert "run5: " in table and "classes below 99.5 % mAP" in table
+    assert "run5 [noise 0.01]: " in table  # the variant lines say where they lose too
     doc = json.loads(json.dumps(to_json(result)))
     assert set(doc["rows"][0]["details"]["per_class"]) == labels
 
@@ -329,6 +330,27 @@ def test_cross_scores_on_a_hand_computed_ranking() -> None:
     # paired with database shapes 0 and 3: those leave the rankings (0: 2 3 1 -> AP 1/3; 1: 2 1 0 -> AP 1)
     scores, _ = cross_scores(distances, query_labels, labels, np.array([0, 3]))
     assert scores["mAP"] == pytest.approx((1 / 3 + 1.0) / 2) and scores["NN"] == 0.5
+
+
+def test_cross_scores_count_first_tier_intruders_by_hand() -> None:
+    from app.services.evaluation_sets import cross_scores
+
+    labels = np.array(["a", "a", "a", "b", "b", "c"])
+    #                          a0   a1   a2   b0   b1   c0
+    distances = np.array([[0.5, 3.0, 4.0, 1.0, 2.0, 0.1],   # query a: c0 a0 b0 b1 a1 a2
+                          [2.0, 0.9, 5.0, 0.3, 0.2, 0.4],   # query a: b1 b0 c0 a1 a0 a2
+                          [1.0, 2.0, 3.0, 0.5, 4.0, 6.0]])  # query b: b0 a0 a1 a2 b1 c0
+    query_labels = np.array(["a", "a", "b"])
+    # unpaired: an a-query's first tier is its first 3 results, a b-query's its first 2
+    _, per_class = cross_scores(distances, query_labels, labels, np.array([-1, -1, -1]))
+    assert per_class["a"]["intruders"] == {"b": 3, "c": 2}  # c0 b0 | b1 b0 c0
+    assert list(per_class["a"]["intruders"]) == ["b", "c"]  # most frequent first
+    assert per_class["b"]["intruders"] == {"a": 1}  # b0 a0
+    # paired (a0, a1, b0 are the queries' counterparts): the tiers shrink to 2, 2 and 1
+    _, per_class = cross_scores(distances, query_labels, labels, np.array([0, 1, 3]))
+    assert per_class["a"]["intruders"] == {"b": 3, "c": 1}  # c0 b0 | b1 b0
+    assert per_class["b"]["intruders"] == {"a": 1}  # a0
+    assert set(per_class) == {"a", "b"}  # classes with queries only
 
 
 def test_fusion_rows(folder: Path, tmp_path: Path) -> None:
