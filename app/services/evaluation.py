@@ -248,9 +248,27 @@ def _bof_lines(
     # service serves with it)
     if frozen is not None and (row.fusion is None or _fused_at(frozen, row.fusion)):
         _check_frozen_encoding(frozen, row, params, options)
-        name = f"{row.name} [frozen {Path(options.vocabulary or '').name}]"
-        lines.insert(1, _score_bof(name, row, frozen, db, db, labels, params, time.perf_counter(), lines[0]))
+        lines[1:1] = _frozen_lines(row, frozen, db, queries, labels, options, params, lines[0], other)
     return lines
+
+
+def _frozen_lines(
+    row: Row, frozen: Vocabulary, db: list[ShapeDescription], queries: list[ShapeDescription] | None,
+    labels: np.ndarray, options: EvaluationOptions, params: EncodeParams, clean: RowResult,
+    other: CrossSet | None,
+) -> list[RowResult]:
+    """What the service serves with the frozen vocabulary: the clean line (Δ against the self-fit
+    one), then the noisy and other-folder queries, each Δ against the served clean line."""
+    name = f"{row.name} [frozen {Path(options.vocabulary or '').name}]"
+    served = _score_bof(name, row, frozen, db, db, labels, params, time.perf_counter(), clean)
+    out = [served]
+    if queries is not None:
+        out.append(_score_bof(f"{name} [noise {options.noise:g}]", row, frozen, db, queries, labels, params,
+                              time.perf_counter(), served))
+    if other is not None:
+        out.append(_score_bof(f"{name} [queries {other.name}]", row, frozen, db, other.descriptions, labels,
+                              params, time.perf_counter(), served, other))
+    return out
 
 
 def _check_frozen_encoding(

@@ -105,21 +105,26 @@ def test_variant_lines_noise_frozen_and_half_fit(folder: Path, tmp_path: Path) -
     assert names == [
         "run5",
         "run5 [frozen frozen-v1]",
+        "run5 [frozen frozen-v1] [noise 0.01]",
         "run5 [fit on 2/3 classes]",
         "run5 [noise 0.01]",
         "shape-dna",
         "shape-dna [noise 0.01]",
     ]
-    main = result.rows[0]
-    for line in result.rows[1:4]:
+    main, served = result.rows[0], result.rows[1]
+    for line in (served, *result.rows[3:5]):
         assert line.reference is main
         assert line.delta_map == pytest.approx(line.scores["mAP"] - main.scores["mAP"])
+    # the served noise line: the frozen words on the noisy queries, its drop from the served clean line
+    served_noise = result.rows[2]
+    assert served_noise.reference is served
+    assert served_noise.delta_map == pytest.approx(served_noise.scores["mAP"] - served.scores["mAP"])
     # clean and noisy descriptions are separate cache entries: 12 + 12 eigen-solves
     assert result.describe["computed"] == 24
     noisy_files = list((tmp_path / "cache").rglob("*.noise0.01-s0.npz"))
     assert len(noisy_files) == 12
     doc = to_json(result)
-    assert json.loads(json.dumps(doc))["rows"][3]["reference"] == "run5"
+    assert json.loads(json.dumps(doc))["rows"][4]["reference"] == "run5"
 
 
 def test_a_fused_row_is_scored_with_the_frozen_words_and_their_scales(folder: Path, tmp_path: Path) -> None:
@@ -300,6 +305,17 @@ def test_queries_from_another_folder(folder: Path, tmp_path: Path) -> None:
     assert names == ["run5", "run5 [queries same]", "shape-dna", "shape-dna [queries same]"]
     for main, cross in ((result.rows[0], result.rows[1]), (result.rows[2], result.rows[3])):
         assert cross.reference is main and cross.scores == pytest.approx(main.scores)
+    # with a frozen vocabulary, the served line of the same queries equals the served clean line
+    random_words = Vocabulary.fit_features(np.random.default_rng(0).random((200, 4)), size=8, run="run5")
+    words = random_words.save(tmp_path / "words")
+    served = evaluate(folder, _options(cache, rows=("run5",), queries=same, vocabulary=words,
+                                       vocabulary_size=4))
+    assert [r.name for r in served.rows] == [
+        "run5", "run5 [frozen words]", "run5 [frozen words] [queries same]", "run5 [queries same]"]
+    clean_served, cross_served = served.rows[1], served.rows[2]
+    assert cross_served.reference is clean_served
+    assert cross_served.scores == pytest.approx(clean_served.scores)
+    assert clean_served.scores["mAP"] != pytest.approx(served.rows[0].scores["mAP"])  # not the self-fit words
     # other names: nothing pairs, every query ranks the whole database and finds its twin first
     renamed = tmp_path / "renamed"
     renamed.mkdir()
