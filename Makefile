@@ -34,7 +34,7 @@ run: install  ## quick start: the synthetic demo corpus in $(DEMO), served on 12
 serve: install  ## serve your own data directory $(DATA) (empty at first; dev mode unless SHAPEBAG_ADMIN_TOKEN is set)
 	$(BIN)/shapebag serve --data-dir $(DATA) --port $(PORT) $$([ -z "$$SHAPEBAG_ADMIN_TOKEN" ] && echo --dev)
 
-test: install chromium  ## the whole suite, ~10 min on 2 cores; starts (then stops) a Docker engine
+test: install chromium  ## the whole suite, ~15 min on 2 cores; starts (then stops) a Docker engine
 	$(BIN)/pytest -q
 
 chromium:  ## Debian's chromium for the browser tests (installed as root; otherwise says they will skip)
