@@ -165,16 +165,31 @@ def class_breakdown(distances: np.ndarray, labels: np.ndarray) -> dict[str, dict
 
 
 def _breakdown(order: np.ndarray, labels: np.ndarray, ap: np.ndarray) -> dict[str, dict]:
-    """class_breakdown from (N, N-1) rankings and (N,) per-query AP."""
+    """class_breakdown from (N, N-1) rankings and (N,) per-query AP: each query's first tier is its
+    class's C - 1 other members."""
+    _, inverse, sizes = np.unique(labels, return_inverse=True, return_counts=True)
+    return ranked_breakdown(labels[order], labels, sizes[inverse] - 1, ap)
+
+
+def ranked_breakdown(
+    ranked: np.ndarray, query_labels: np.ndarray, tiers: np.ndarray, ap: np.ndarray
+) -> dict[str, dict]:
+    """Per query class: the mean of its queries' AP (NaN ones left out) and the other classes found
+    in their first tiers, most frequent first.
+
+    ranked       : (q, L) class of each ranked result, row = query
+    query_labels : (q,);  tiers : (q,) how many first results each query's tier holds;  ap : (q,)
+    -> {class: {"mAP": float, "intruders": {other class: count}}}, the classes of query_labels only
+    """
+    in_tier = np.arange(ranked.shape[1])[None, :] < np.asarray(tiers)[:, None]  # (q, L)
     out: dict[str, dict] = {}
-    for cls in sorted(set(labels.tolist())):
-        members = np.flatnonzero(labels == cls)
-        tier = len(members) - 1
-        found = labels[order[members, :tier]].ravel() if tier else np.array([], dtype=labels.dtype)
+    for cls in sorted(set(query_labels.tolist())):
+        members = np.flatnonzero(query_labels == cls)
+        found = ranked[members][in_tier[members]]
         names, counts = np.unique(found[found != cls], return_counts=True)
-        ranked = sorted(zip(names.tolist(), counts.tolist(), strict=True), key=lambda nc: (-nc[1], nc[0]))
+        order = sorted(zip(names.tolist(), counts.tolist(), strict=True), key=lambda nc: (-nc[1], nc[0]))
         values = ap[members]
         values = values[~np.isnan(values)]
         out[str(cls)] = {"mAP": float(values.mean()) if values.size else float("nan"),
-                         "intruders": {str(n): int(c) for n, c in ranked}}
+                         "intruders": {str(n): int(c) for n, c in order}}
     return out

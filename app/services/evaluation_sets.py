@@ -64,7 +64,7 @@ def cross_scores(
     pairs        : (q,) database counterpart of each query, left out of its ranking, or all -1
     -> (mean scores, per-class {"mAP", "intruders"}), relevant = database shapes of the query's class;
        a class's intruders are the other classes in its queries' first tiers (each query's first
-       R results, R = its relevant shapes), most frequent first, as metrics.class_breakdown counts them
+       R results, R = its relevant shapes), most frequent first (metrics.ranked_breakdown)
     """
     q, n = distances.shape
     order = np.argsort(distances, axis=1, kind="stable")  # (q, N), ties by index
@@ -73,14 +73,6 @@ def cross_scores(
     ranked = labels[order]  # (q, L) class of each result
     relevant = ranked == query_labels[:, None]
     per_query = metrics.relevance_scores(relevant)
-    ap = per_query["mAP"]
-    tiers = relevant.sum(axis=1)  # (q,) R of each query
-    per_class = {}
-    for c in sorted(set(query_labels.tolist())):
-        members = np.flatnonzero(query_labels == c)
-        found = np.concatenate([ranked[i, : tiers[i]] for i in members])
-        names, counts = np.unique(found[found != c], return_counts=True)
-        intruders = sorted(zip(names.tolist(), counts.tolist(), strict=True), key=lambda nc: (-nc[1], nc[0]))
-        per_class[str(c)] = {"mAP": float(np.nanmean(ap[members])),
-                             "intruders": {str(o): int(k) for o, k in intruders}}
+    # each query's first tier: as many results as it has relevant shapes
+    per_class = metrics.ranked_breakdown(ranked, query_labels, relevant.sum(axis=1), per_query["mAP"])
     return metrics.mean_scores(per_query), per_class
