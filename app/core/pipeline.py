@@ -43,10 +43,11 @@ class DescribeParams:
     # (synthetic corpus); a quarter of the smoothing that cost 6-8 points on decimated scans
     # (docs/results.md, "Intrinsic Laplacian")
     smoothing: int = 10
-    # uniform, intrinsic or cotangent Taubin weights (app.core.smoothing). The surface's own weights
+    # uniform, intrinsic, cotangent or area Taubin weights (app.core.smoothing). The surface's own weights
     # do not even out a triangulation as uniform ones do: intrinsic weights at the same 10 steps lose
     # 21.7 points pure (5.0 fused, NN 0.947) on SHREC'11's triangulation variant and 14.5 (6.0) on noisy
-    # synthetic shapes, while they gain 2.7 on the rigid column (docs/results.md, round 10)
+    # synthetic shapes, while they gain 2.7 on the rigid column (docs/results.md, round 10). Area
+    # weights gain on every organic column and lose 2.7 on the rigid one (round 12)
     smoothing_weights: str = "uniform"
     # intrinsic (cotangent weights of the intrinsic Delaunay triangulation: the same operator on a
     # Delaunay mesh, far less dependent on the triangulation elsewhere) | cotangent (the paper's)

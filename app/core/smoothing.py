@@ -12,6 +12,13 @@ the shape does not shrink as plain Laplacian smoothing does. What W is decides w
 - "cotangent": the extrinsic cotangent weights, negative ones (non-Delaunay edges) clipped to 0.
   On the long thin triangles of a decimated mesh most weights are clipped, and the clipped filter no
   longer reproduces a plane.
+- "area": each neighbour j by the area of the one or two faces on the edge ij. The averaging runs
+  over the surface of the vertex's star rather than over its count of neighbours, so a neighbour that
+  stands for more surface pulls more; the vertex still slides along the surface as under uniform
+  weights. Face areas are intrinsic (they follow from the edge lengths). Measured (docs/results.md,
+  round 12): the best organic figures of any weighting (triangulation variant −0.63 from clean, noise
+  −1.01, fused), but −2.7 on the rigid column, where a decimated CAD part's few large faces drag
+  their vertices across it (airplanes −23): an option, not the default.
 - "uniform" (DescribeParams' default): each neighbour by 1 (trimesh.smoothing.filter_taubin). It
   depends on the triangulation: on an irregular mesh it slides vertices along the surface towards
   their neighbours' centroid and changes the shape by where the vertices were (issue 11). That slide
@@ -34,7 +41,7 @@ import trimesh
 from app.core.laplacian import cotangent_laplacian, intrinsic_delaunay_laplacian
 from app.core.mesh import Mesh
 
-WEIGHTS = ("intrinsic", "cotangent", "uniform")
+WEIGHTS = ("intrinsic", "cotangent", "area", "uniform")
 LAMBDA, MU = 0.5, -0.53  # Taubin's pass band: k_PB = 1/λ + 1/μ ≈ 0.11
 
 
@@ -44,21 +51,32 @@ def averaging_operator(mesh: Mesh, weights: str) -> tuple[sp.csr_matrix, np.ndar
 
     W_ij ∝ max(-L_ij, 0) for the named Laplacian L, "intrinsic" or "cotangent" (the intrinsic one has
     no negative weight to clip; a negative extrinsic weight would push a vertex away from its
-    neighbour). The uniform filter is trimesh's (taubin).
+    neighbour); W_ij ∝ the area of the faces on edge ij ("area"). The uniform
+    filter is trimesh's (taubin).
     """
-    if weights == "intrinsic":
-        stiffness, _ = intrinsic_delaunay_laplacian(mesh.vertices, mesh.faces)
-    elif weights == "cotangent":
-        stiffness, _ = cotangent_laplacian(mesh.vertices, mesh.faces)
+    if weights in ("intrinsic", "cotangent"):
+        laplace = intrinsic_delaunay_laplacian if weights == "intrinsic" else cotangent_laplacian
+        stiffness, _ = laplace(mesh.vertices, mesh.faces)
+        w = (-stiffness).tocsr()
+    elif weights == "area":
+        w = _area_weights(mesh)
     else:
-        raise ValueError(f"weights must be intrinsic or cotangent, not {weights!r}")
-    w = (-stiffness).tocsr()
+        raise ValueError(f"weights must be intrinsic, cotangent or area, not {weights!r}")
     w.setdiag(0)
     w.data = np.maximum(w.data, 0.0)
     w.eliminate_zeros()
     rows = np.asarray(w.sum(axis=1)).ravel()
     has = rows > 0
     return (sp.diags(np.where(has, 1.0 / np.where(has, rows, 1.0), 0.0)) @ w).tocsr(), has
+
+
+def _area_weights(mesh: Mesh) -> sp.csr_matrix:
+    """(n, n) weights on the mesh's edges: W_ij = the summed area of the one or two faces on edge ij."""
+    v, f = mesh.vertices, mesh.faces
+    area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)  # (f,)
+    rows = np.concatenate([f[:, 0], f[:, 1], f[:, 2], f[:, 1], f[:, 2], f[:, 0]])
+    cols = np.concatenate([f[:, 1], f[:, 2], f[:, 0], f[:, 0], f[:, 1], f[:, 2]])
+    return sp.csr_matrix((np.tile(area, 6), (rows, cols)), shape=(len(v), len(v)))
 
 
 def taubin(mesh: Mesh, steps: int, weights: str) -> Mesh:

@@ -53,7 +53,7 @@ class EvaluationOptions:
     k: int = DescribeParams.k  # eigenpairs
     time_range: str = DescribeParams.time_range  # weyl | spectrum (the paper's t_min)
     smoothing: int = DescribeParams.smoothing  # Taubin steps (λ, μ, λ ...)
-    smoothing_weights: str = DescribeParams.smoothing_weights  # intrinsic | cotangent | uniform
+    smoothing_weights: str = DescribeParams.smoothing_weights  # one of smoothing.WEIGHTS
     fill_holes: float = DescribeParams.fill_holes  # largest cap closed, fraction of the area
     laplacian: str = DescribeParams.laplacian  # cotangent | intrinsic (intrinsic Delaunay)
     remesh: bool = DescribeParams.remesh  # isotropic remeshing at the canonical resolution

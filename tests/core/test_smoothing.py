@@ -37,13 +37,16 @@ def test_zero_steps_is_the_identity(weights):
 
 
 def test_an_unknown_weighting_is_refused():
-    with pytest.raises(ValueError, match="intrinsic, cotangent, uniform"):
+    with pytest.raises(ValueError, match="intrinsic, cotangent, area, uniform"):
         taubin(_sphere(1), 2, "laplace")
-    with pytest.raises(ValueError, match="intrinsic or cotangent"):
+    with pytest.raises(ValueError, match="intrinsic, cotangent or area"):
         averaging_operator(_sphere(1), "uniform")
 
 
-@pytest.mark.parametrize("weights", ["intrinsic", "cotangent"])
+AVERAGED = [w for w in WEIGHTS if w != "uniform"]  # the weightings averaging_operator builds
+
+
+@pytest.mark.parametrize("weights", AVERAGED)
 def test_weights_average_the_neighbours(weights):
     w, has = averaging_operator(_sphere(2), weights)
     assert has.all()
@@ -51,7 +54,7 @@ def test_weights_average_the_neighbours(weights):
     assert w.diagonal().max() == 0
 
 
-@pytest.mark.parametrize("weights", ["intrinsic", "cotangent"])
+@pytest.mark.parametrize("weights", AVERAGED)
 def test_steps_alternate_lambda_and_mu(weights):
     # `steps` counts single steps (trimesh's convention): 1 is a λ step, 2 a λ step then a μ step
     rng = np.random.default_rng(2)
@@ -74,6 +77,45 @@ def test_uniform_steps_are_trimesh_filter_taubin():
     np.testing.assert_array_equal(taubin(mesh, 7, "uniform").vertices, tm.vertices)
 
 
+def _grid(size: int) -> Mesh:
+    """A flat size x size grid of unit squares, each cut by the same diagonal: every face has area ½
+    and every interior vertex six neighbours."""
+    ij = np.array([(i, j) for i in range(size + 1) for j in range(size + 1)], dtype=np.float64)
+    idx = np.arange((size + 1) ** 2).reshape(size + 1, size + 1)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel()
+    faces = np.vstack([np.column_stack([a, b, d]), np.column_stack([a, d, c])])
+    return Mesh(np.column_stack([ij, np.zeros(len(ij))]), faces.astype(np.int64))
+
+
+def test_area_weights_are_uniform_where_the_surface_is_sampled_evenly():
+    # every face the same area, every interior vertex the same star: nothing for the areas to weigh,
+    # so the rows of vertices two rings from the boundary are the uniform average exactly
+    size = 6
+    grid = _grid(size)
+    w, _ = averaging_operator(grid, "area")
+    xy = grid.vertices[:, :2]
+    deep = np.where(((xy >= 2) & (xy <= size - 2)).all(axis=1))[0]
+    assert deep.size == 9
+    for i in deep:
+        row = w.getrow(i)
+        assert row.nnz == 6 and np.allclose(row.data, 1 / 6, atol=1e-15)
+
+
+def test_the_area_average_does_not_follow_the_count_of_neighbours():
+    # a flat fan whose rim has 12 vertices on one half-circle and 3 on the other: the uniform average
+    # of the rim is pulled to the crowded side (by 0.35 of the radius); the average by the surface the
+    # neighbours stand for stays near the centre, where the star's own surface is centred
+    angles = np.concatenate([np.linspace(0, np.pi, 12, endpoint=False), np.pi + np.pi * np.arange(1, 4) / 4])
+    rim = np.column_stack([np.cos(angles), np.sin(angles), np.zeros(15)])
+    fan = Mesh(np.vstack([[0.0, 0.0, 0.0], rim]),
+               np.array([[0, 1 + j, 1 + (j + 1) % 15] for j in range(15)], dtype=np.int64))
+    w, _ = averaging_operator(fan, "area")
+    uniform = np.linalg.norm(rim.mean(axis=0))
+    weighted = np.linalg.norm(w.getrow(0) @ fan.vertices)
+    assert uniform > 0.3
+    assert weighted < 0.2 * uniform  # 0.053 against 0.352
+
+
 def test_the_middle_of_a_flat_patch_stays_put_only_with_intrinsic_weights(random_rotation):
     # A linear function is its own average under the cotangent weights of any planar triangulation in
     # which they are all ≥ 0: the intrinsic Delaunay one (flips keep a plane a plane). The extrinsic
@@ -91,6 +133,7 @@ def test_the_middle_of_a_flat_patch_stays_put_only_with_intrinsic_weights(random
         assert motion("intrinsic", steps) < 1e-3 * edge  # robust-laplacian's mollification: ~1e-6
         assert motion("cotangent", steps) > 0.05 * edge
         assert motion("uniform", steps) > 0.2 * edge
+        assert motion("area", steps) > 0.05 * edge  # it slides too
     for weights in WEIGHTS:  # and nothing leaves the plane, the boundary included
         assert np.abs(taubin(plane, 10, weights).vertices @ rot[:, 2]).max() < 1e-12
 
