@@ -51,8 +51,8 @@ def averaging_operator(mesh: Mesh, weights: str) -> tuple[sp.csr_matrix, np.ndar
 
     W_ij ∝ max(-L_ij, 0) for the named Laplacian L, "intrinsic" or "cotangent" (the intrinsic one has
     no negative weight to clip; a negative extrinsic weight would push a vertex away from its
-    neighbour); W_ij ∝ the area of the faces on edge ij ("area"). The uniform
-    filter is trimesh's (taubin).
+    neighbour); W_ij ∝ the area of the faces on edge ij ("area"). The uniform filter is trimesh's
+    (taubin).
     """
     if weights in ("intrinsic", "cotangent"):
         laplace = intrinsic_delaunay_laplacian if weights == "intrinsic" else cotangent_laplacian
@@ -72,11 +72,10 @@ def averaging_operator(mesh: Mesh, weights: str) -> tuple[sp.csr_matrix, np.ndar
 
 def _area_weights(mesh: Mesh) -> sp.csr_matrix:
     """(n, n) weights on the mesh's edges: W_ij = the summed area of the one or two faces on edge ij."""
-    v, f = mesh.vertices, mesh.faces
-    area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)  # (f,)
-    rows = np.concatenate([f[:, 0], f[:, 1], f[:, 2], f[:, 1], f[:, 2], f[:, 0]])
+    f, n = mesh.faces, mesh.n_vertices
+    rows = np.concatenate([f[:, 0], f[:, 1], f[:, 2], f[:, 1], f[:, 2], f[:, 0]])  # each edge both ways
     cols = np.concatenate([f[:, 1], f[:, 2], f[:, 0], f[:, 0], f[:, 1], f[:, 2]])
-    return sp.csr_matrix((np.tile(area, 6), (rows, cols)), shape=(len(v), len(v)))
+    return sp.csr_matrix((np.tile(mesh.face_areas(), 6), (rows, cols)), shape=(n, n))  # duplicates sum
 
 
 def taubin(mesh: Mesh, steps: int, weights: str) -> Mesh:
