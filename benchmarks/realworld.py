@@ -5,6 +5,7 @@
     python -m benchmarks.realworld --jobs 2 --timeout 120
     python -m benchmarks.realworld --baseline            # with the agg=3-only simplify of before
     python -m benchmarks.realworld --target-vertices 2000 --name realworld-2k   # price another setting
+    python -m benchmarks.realworld --smoothing-weights area --name realworld-area   # or another weighting
 
 Each file runs in a fresh child (`OMP/OPENBLAS/MKL_NUM_THREADS=1` in its environment, so set before
 numpy loads): `mesh_policy.load_upload` (load + validate + clean + surface check, the service's vertex
@@ -279,12 +280,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--target-vertices", type=int, default=None,
                     help="canonical resolution (default: the shipped one)")
     ap.add_argument("--k", type=int, default=None, help="eigenpairs (default: the shipped k)")
+    ap.add_argument("--smoothing-weights", default=None,
+                    help="Taubin weights, one of app.core.smoothing.WEIGHTS (default: the shipped ones)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    overrides = {key: value for key in ("target_vertices", "k") if (value := getattr(args, key)) is not None}
+    overrides = {key: value for key in ("target_vertices", "k", "smoothing_weights")
+                 if (value := getattr(args, key)) is not None}
     if args.child:
         print(json.dumps(describe_upload(args.child, args.baseline, overrides)))
         return 0
+    from app.core.pipeline import DescribeParams  # here, not at the top: the children import it themselves
+
+    try:  # a setting DescribeParams refuses is the command's error, not one per file
+        DescribeParams(**overrides)
+    except ValueError as exc:
+        print(f"realworld: {exc}")
+        return 2
     if not CORPUS.is_dir():
         print(f"no corpus at {CORPUS} (set SHAPEBAG_REALWORLD)")
         return 1

@@ -81,6 +81,20 @@ def test_realworld_benchmark_prices_another_resolution(tmp_path):
 
 @pytest.mark.slow
 @needs_corpus
+def test_realworld_benchmark_prices_another_smoothing(tmp_path):
+    """--smoothing-weights reaches the child's DescribeParams: a known weighting describes the file and
+    is recorded; an unknown one is refused before any file is run."""
+    wingnut = ["--files", "oded__wingnut.obj"]
+    code = realworld.main([*wingnut, "--smoothing-weights", "area", "--name", "rw-area"])
+    doc = _json(tmp_path, "rw-area")
+    assert doc["overrides"] == {"smoothing_weights": "area"}
+    assert [r["outcome"] for r in doc["rows"]] == ["described"] and code == 0
+    assert realworld.main([*wingnut, "--smoothing-weights", "laplace", "--name", "rw-bad"]) == 2
+    assert not (tmp_path / "results" / "rw-bad.json").exists()
+
+
+@pytest.mark.slow
+@needs_corpus
 def test_large_inputs_benchmark_runs_ours_and_the_baseline(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(large_inputs, "SIZES", {"tiny": ("oded__wingnut.obj", 1)})  # 3k -> 12k vertices
     assert large_inputs.main(["--sizes", "tiny", "--baseline", "--name", "large-smoke"]) == 0
