@@ -26,7 +26,8 @@ class DescribeSettings(BaseModel):
     m: int = Field(default=DescribeParams.m, ge=4)
     target_vertices: int = Field(default=DescribeParams.target_vertices, ge=0)
     smoothing: int = Field(default=DescribeParams.smoothing, ge=0)
-    smoothing_weights: Literal["intrinsic", "cotangent", "area", "uniform"] = DescribeParams.smoothing_weights  # type: ignore[assignment]
+    smoothing_weights: Literal["intrinsic", "cotangent", "area", "capped-area", "uniform"] = (
+        DescribeParams.smoothing_weights)  # type: ignore[assignment]
     time_range: Literal["spectrum", "weyl"] = DescribeParams.time_range  # type: ignore[assignment]
     laplacian: Literal["cotangent", "intrinsic"] = DescribeParams.laplacian  # type: ignore[assignment]
     remesh: bool = DescribeParams.remesh

@@ -64,7 +64,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "default %(default)s)")
     p.add_argument("--smoothing-weights", choices=WEIGHTS, default=EvaluationOptions.smoothing_weights,
                    help="Taubin weights: intrinsic (intrinsic Delaunay cotangent), cotangent (extrinsic, "
-                   "clipped at 0), area (faces on each edge) or uniform (default %(default)s)")
+                   "clipped at 0), area (faces on each edge), capped-area (the same, each face at most the "
+                   "median face) or uniform (default %(default)s)")
     p.add_argument("--fill-holes", type=float, default=EvaluationOptions.fill_holes, metavar="F",
                    help="close holes whose cap adds at most F of the area (0: none; default %(default)s)")
     p.add_argument("--laplacian", choices=LAPLACIANS, default=EvaluationOptions.laplacian,

@@ -47,7 +47,8 @@ class DescribeParams:
     # do not even out a triangulation as uniform ones do: intrinsic weights at the same 10 steps lose
     # 21.7 points pure (5.0 fused, NN 0.947) on SHREC'11's triangulation variant and 14.5 (6.0) on noisy
     # synthetic shapes, while they gain 2.7 on the rigid column (docs/results.md, round 10). Area
-    # weights gain on every organic column and lose 2.7 on the rigid one (round 12)
+    # weights gain on every organic column and lose 2.7 on the rigid one (round 12); capped-area weights
+    # hold it, and lose SHREC'11 served and noisy synthetic shapes (round 13)
     smoothing_weights: str = "uniform"
     # intrinsic (cotangent weights of the intrinsic Delaunay triangulation: the same operator on a
     # Delaunay mesh, far less dependent on the triangulation elsewhere) | cotangent (the paper's)

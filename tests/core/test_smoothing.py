@@ -37,9 +37,9 @@ def test_zero_steps_is_the_identity(weights):
 
 
 def test_an_unknown_weighting_is_refused():
-    with pytest.raises(ValueError, match="intrinsic, cotangent, area, uniform"):
+    with pytest.raises(ValueError, match="intrinsic, cotangent, area, capped-area, uniform"):
         taubin(_sphere(1), 2, "laplace")
-    with pytest.raises(ValueError, match="intrinsic, cotangent or area"):
+    with pytest.raises(ValueError, match="intrinsic, cotangent, area or capped-area"):
         averaging_operator(_sphere(1), "uniform")
 
 
@@ -87,12 +87,13 @@ def _grid(size: int) -> Mesh:
     return Mesh(np.column_stack([ij, np.zeros(len(ij))]), faces.astype(np.int64))
 
 
-def test_area_weights_are_uniform_where_the_surface_is_sampled_evenly():
+@pytest.mark.parametrize("weights", ["area", "capped-area"])
+def test_area_weights_are_uniform_where_the_surface_is_sampled_evenly(weights):
     # every face the same area, every interior vertex the same star: nothing for the areas to weigh,
     # so the rows of vertices two rings from the boundary are the uniform average exactly
     size = 6
     grid = _grid(size)
-    w, _ = averaging_operator(grid, "area")
+    w, _ = averaging_operator(grid, weights)
     xy = grid.vertices[:, :2]
     deep = np.where(((xy >= 2) & (xy <= size - 2)).all(axis=1))[0]
     assert deep.size == 9
@@ -116,6 +117,41 @@ def test_the_area_average_does_not_follow_the_count_of_neighbours():
     assert weighted < 0.2 * uniform  # 0.053 against 0.352
 
 
+def _fan(angles: np.ndarray, radii: np.ndarray | None = None) -> Mesh:
+    """A flat fan: vertex 0 at the origin, rim vertex 1 + j at angles[j] (radius radii[j], 1 by
+    default), face j between rim vertices j and j + 1 (cyclically)."""
+    r = np.ones(len(angles)) if radii is None else radii
+    rim = np.column_stack([r * np.cos(angles), r * np.sin(angles), np.zeros(len(angles))])
+    n = len(angles)
+    return Mesh(np.vstack([[0.0, 0.0, 0.0], rim]),
+                np.array([[0, 1 + j, 1 + (j + 1) % n] for j in range(n)], dtype=np.int64))
+
+
+def test_capped_area_weights_still_discount_a_crowded_side():
+    # 4 rim vertices 0.1 rad apart, 7 more spread over the rest of the circle: the three small faces
+    # are below the median face, so the cap does not touch them, and the average stays near the centre
+    # where the uniform one is pulled to the cluster
+    angles = np.concatenate([0.1 * np.arange(4), np.linspace(0.3, 2 * np.pi, 9)[1:-1]])
+    fan = _fan(angles)
+    uniform = np.linalg.norm(fan.vertices[1:].mean(axis=0))
+    capped = np.linalg.norm(averaging_operator(fan, "capped-area")[0].getrow(0) @ fan.vertices)
+    area = np.linalg.norm(averaging_operator(fan, "area")[0].getrow(0) @ fan.vertices)
+    assert uniform > 0.2
+    assert capped == pytest.approx(area, abs=1e-12)  # no face is above the median
+    assert capped < 0.25 * uniform
+
+
+def test_capped_area_weights_give_a_large_face_no_more_than_a_usual_one():
+    # a regular hexagonal fan with one rim vertex pulled out to 5x the radius: its two faces are 5x
+    # the others, above the median. Area weights let that neighbour pull with 10/28 of the row; capped
+    # at the median, every face counts as the usual one and the row is the uniform 1/6
+    fan = _fan(np.pi / 3 * np.arange(6), np.array([5.0, 1, 1, 1, 1, 1]))
+    capped = averaging_operator(fan, "capped-area")[0].getrow(0)
+    area = averaging_operator(fan, "area")[0].getrow(0)
+    assert np.allclose(capped.toarray().ravel()[1:], 1 / 6, atol=1e-15)
+    assert area[0, 1] == pytest.approx(10 / 28)
+
+
 def test_the_middle_of_a_flat_patch_stays_put_only_with_intrinsic_weights(random_rotation):
     # A linear function is its own average under the cotangent weights of any planar triangulation in
     # which they are all ≥ 0: the intrinsic Delaunay one (flips keep a plane a plane). The extrinsic
@@ -134,6 +170,7 @@ def test_the_middle_of_a_flat_patch_stays_put_only_with_intrinsic_weights(random
         assert motion("cotangent", steps) > 0.05 * edge
         assert motion("uniform", steps) > 0.2 * edge
         assert motion("area", steps) > 0.05 * edge  # it slides too
+        assert motion("capped-area", steps) > 0.05 * edge
     for weights in WEIGHTS:  # and nothing leaves the plane, the boundary included
         assert np.abs(taubin(plane, 10, weights).vertices @ rot[:, 2]).max() < 1e-12
 
