@@ -12,6 +12,7 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from app.core.pipeline import DescribeParams
 from app.core.resolution import SUBDIVISIONS
+from app.core.smoothing import WEIGHTS
 from app.core.vocabulary import EncodeParams
 
 DEFAULT_ADMIN_TOKEN = "change-me"
@@ -26,8 +27,7 @@ class DescribeSettings(BaseModel):
     m: int = Field(default=DescribeParams.m, ge=4)
     target_vertices: int = Field(default=DescribeParams.target_vertices, ge=0)
     smoothing: int = Field(default=DescribeParams.smoothing, ge=0)
-    smoothing_weights: Literal["intrinsic", "cotangent", "area", "capped-area", "uniform"] = (
-        DescribeParams.smoothing_weights)  # type: ignore[assignment]
+    smoothing_weights: str = DescribeParams.smoothing_weights  # one of app.core.smoothing.WEIGHTS
     time_range: Literal["spectrum", "weyl"] = DescribeParams.time_range  # type: ignore[assignment]
     laplacian: Literal["cotangent", "intrinsic"] = DescribeParams.laplacian  # type: ignore[assignment]
     remesh: bool = DescribeParams.remesh
@@ -40,6 +40,13 @@ class DescribeSettings(BaseModel):
     def _known_subdivision(cls, value: str) -> str:
         if value not in SUBDIVISIONS:
             raise ValueError(f"must be one of {', '.join(SUBDIVISIONS)}")
+        return value
+
+    @field_validator("smoothing_weights")
+    @classmethod
+    def _known_smoothing_weights(cls, value: str) -> str:  # the core's list, not a copy of it
+        if value not in WEIGHTS:
+            raise ValueError(f"must be one of {', '.join(WEIGHTS)}")
         return value
 
     def params(self) -> DescribeParams:

@@ -6,6 +6,7 @@
     python -m benchmarks.realworld --baseline            # with the agg=3-only simplify of before
     python -m benchmarks.realworld --target-vertices 2000 --name realworld-2k   # price another setting
     python -m benchmarks.realworld --smoothing-weights area --name realworld-area   # or another weighting
+    python -m benchmarks.realworld --smoothing 12 --smoothing-weights capped-area --name realworld-c12
 
 Each file runs in a fresh child (`OMP/OPENBLAS/MKL_NUM_THREADS=1` in its environment, so set before
 numpy loads): `mesh_policy.load_upload` (load + validate + clean + surface check, the service's vertex
@@ -280,11 +281,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--target-vertices", type=int, default=None,
                     help="canonical resolution (default: the shipped one)")
     ap.add_argument("--k", type=int, default=None, help="eigenpairs (default: the shipped k)")
+    ap.add_argument("--smoothing", type=int, default=None, help="Taubin steps (default: the shipped count)")
     ap.add_argument("--smoothing-weights", default=None,
                     help="Taubin weights, one of app.core.smoothing.WEIGHTS (default: the shipped ones)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    overrides = {key: value for key in ("target_vertices", "k", "smoothing_weights")
+    overrides = {key: value for key in ("target_vertices", "k", "smoothing", "smoothing_weights")
                  if (value := getattr(args, key)) is not None}
     if args.child:
         print(json.dumps(describe_upload(args.child, args.baseline, overrides)))

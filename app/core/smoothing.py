@@ -24,7 +24,9 @@ the shape does not shrink as plain Laplacian smoothing does. What W is decides w
   part's few large faces no longer drag their vertices. It holds the rigid column (+0.2 self-fit, +0.6
   served) and is within 0.15 of uniform on the organic ones, but loses 0.36 on noisy synthetic shapes
   and 0.05 on SHREC'11 served with its own refit vocabulary (99.46 over three seeds, under the 99.5
-  goal): an option (docs/results.md, round 13).
+  goal): an option (docs/results.md, round 13). At 12 steps they hold every column self-fit and
+  reach the old defaults' noise figure (98.61), but served they lose the triangulation variant's
+  1-point bound at two of three vocabulary seeds and SHREC'11 through HTTP (0.99495): not yet a default.
 - "uniform" (DescribeParams' default): each neighbour by 1 (trimesh.smoothing.filter_taubin). It
   depends on the triangulation: on an irregular mesh it slides vertices along the surface towards
   their neighbours' centroid and changes the shape by where the vertices were (issue 11). That slide
@@ -48,6 +50,7 @@ from app.core.laplacian import cotangent_laplacian, intrinsic_delaunay_laplacian
 from app.core.mesh import Mesh
 
 WEIGHTS = ("intrinsic", "cotangent", "area", "capped-area", "uniform")
+AVERAGED = tuple(w for w in WEIGHTS if w != "uniform")  # what averaging_operator builds; uniform is trimesh's
 LAMBDA, MU = 0.5, -0.53  # Taubin's pass band: k_PB = 1/λ + 1/μ ≈ 0.11
 
 
@@ -67,7 +70,7 @@ def averaging_operator(mesh: Mesh, weights: str) -> tuple[sp.csr_matrix, np.ndar
     elif weights in ("area", "capped-area"):
         w = _area_weights(mesh, capped=weights == "capped-area")
     else:
-        raise ValueError(f"weights must be intrinsic, cotangent, area or capped-area, not {weights!r}")
+        raise ValueError(f"weights must be one of {', '.join(AVERAGED)}, not {weights!r}")
     w.setdiag(0)
     w.data = np.maximum(w.data, 0.0)
     w.eliminate_zeros()

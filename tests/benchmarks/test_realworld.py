@@ -82,12 +82,12 @@ def test_realworld_benchmark_prices_another_resolution(tmp_path):
 @pytest.mark.slow
 @needs_corpus
 def test_realworld_benchmark_prices_another_smoothing(tmp_path):
-    """--smoothing-weights reaches the child's DescribeParams: a known weighting describes the file and
-    is recorded; an unknown one is refused before any file is run."""
+    """--smoothing and --smoothing-weights reach the child's DescribeParams: a known setting describes the
+    file and is recorded; an unknown one is refused before any file is run."""
     wingnut = ["--files", "oded__wingnut.obj"]
-    code = realworld.main([*wingnut, "--smoothing-weights", "area", "--name", "rw-area"])
+    code = realworld.main([*wingnut, "--smoothing", "12", "--smoothing-weights", "area", "--name", "rw-area"])
     doc = _json(tmp_path, "rw-area")
-    assert doc["overrides"] == {"smoothing_weights": "area"}
+    assert doc["overrides"] == {"smoothing": 12, "smoothing_weights": "area"}
     assert [r["outcome"] for r in doc["rows"]] == ["described"] and code == 0
     assert realworld.main([*wingnut, "--smoothing-weights", "laplace", "--name", "rw-bad"]) == 2
     assert not (tmp_path / "results" / "rw-bad.json").exists()
