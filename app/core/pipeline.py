@@ -37,19 +37,20 @@ class DescribeParams:
     # smoothed (docs/results.md)
     time_range: str = "spectrum"
     target_vertices: int = 1000  # canonical resolution; 0 keeps the input resolution
-    # Taubin steps (λ, μ, λ ...: 10 = 5 pairs) at the canonical resolution; 0 = none. 10 with the
-    # intrinsic Laplacian: within 0.7 points of clean on SHREC'11's triangulation variant and 1.5
-    # under noise (fused), where 40 (the old default) costs 2.0 and 2.6 points on smooth shapes
-    # (synthetic corpus); a quarter of the smoothing that cost 6-8 points on decimated scans
-    # (docs/results.md, "Intrinsic Laplacian")
-    smoothing: int = 10
-    # uniform, intrinsic, cotangent or area Taubin weights (app.core.smoothing). The surface's own weights
-    # do not even out a triangulation as uniform ones do: intrinsic weights at the same 10 steps lose
-    # 21.7 points pure (5.0 fused, NN 0.947) on SHREC'11's triangulation variant and 14.5 (6.0) on noisy
-    # synthetic shapes, while they gain 2.7 on the rigid column (docs/results.md, round 10). Area
-    # weights gain on every organic column and lose 2.7 on the rigid one (round 12); capped-area weights
-    # hold it, and lose SHREC'11 served and noisy synthetic shapes (round 13)
-    smoothing_weights: str = "uniform"
+    # Taubin steps (λ, μ, λ ...: 12 = 6 pairs) at the canonical resolution; 0 = none. With capped-area
+    # weights, 12 steps hold the old defaults' noise figure (98.6 fused, served and self-fit) where
+    # uniform Taubin 10 lost 0.4, and tie it on SHREC'11, its triangulation variant, rigid, scan-like
+    # and synthetic shapes (docs/results.md, round 14); past 12 the triangulation variant pays for the
+    # noise, and 40 uniform steps (the old default) cost 6-8 points on decimated scans
+    smoothing: int = 12
+    # capped-area (the default), area, intrinsic, cotangent or uniform Taubin weights
+    # (app.core.smoothing). capped-area: each neighbour by the area of the faces on its edge, each face
+    # counted at most as the mesh's median face: intrinsic (face areas), so a crowded side does not pull,
+    # and a CAD part's few large faces do not drag their vertices. The surface's cotangent weights do
+    # not even out a triangulation at all: intrinsic weights lose 5.0 fused on SHREC'11's triangulation
+    # variant and 6.0 on noisy synthetic shapes (round 10); plain area weights lose 2.7 on the rigid
+    # column (round 12); uniform weights (the default until round 14) depend on the connectivity
+    smoothing_weights: str = "capped-area"
     # intrinsic (cotangent weights of the intrinsic Delaunay triangulation: the same operator on a
     # Delaunay mesh, far less dependent on the triangulation elsewhere) | cotangent (the paper's)
     laplacian: str = "intrinsic"

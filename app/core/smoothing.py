@@ -1,4 +1,4 @@
-"""Taubin λ|μ smoothing with the mesh's uniform weights (the default) or the surface's own.
+"""Taubin λ|μ smoothing with capped area weights (the default), other intrinsic weights, or uniform ones.
 
 Taubin's filter alternates a shrinking step x <- x + λ (W x - x) and an inflating one with μ < 0, W a
 row-stochastic averaging of each vertex's neighbours: low frequencies pass, vertex noise does not, and
@@ -19,19 +19,19 @@ the shape does not shrink as plain Laplacian smoothing does. What W is decides w
   round 12): the best organic figures of any weighting (triangulation variant −0.63 from clean, noise
   −1.01, fused), but −2.7 on the rigid column, where a decimated CAD part's few large faces drag
   their vertices across it (airplanes −23): an option, not the default.
-- "capped-area": the same, each face's area capped at the mesh's median face area, so a face larger
-  than usual counts as a usual one: smaller faces (a crowded side) still count for less, a decimated CAD
-  part's few large faces no longer drag their vertices. It holds the rigid column (+0.2 self-fit, +0.6
-  served) and is within 0.15 of uniform on the organic ones, but loses 0.36 on noisy synthetic shapes
-  and 0.05 on SHREC'11 served with its own refit vocabulary (99.46 over three seeds, under the 99.5
-  goal): an option (docs/results.md, round 13). At 12 steps they hold every column self-fit and
-  reach the old defaults' noise figure (98.61), but served they lose the triangulation variant's
-  1-point bound at two of three vocabulary seeds and SHREC'11 through HTTP (0.99495): not yet a default.
-- "uniform" (DescribeParams' default): each neighbour by 1 (trimesh.smoothing.filter_taubin). It
-  depends on the triangulation: on an irregular mesh it slides vertices along the surface towards
-  their neighbours' centroid and changes the shape by where the vertices were (issue 11). That slide
-  is also why it wins where the others lose: two triangulations of one surface come out more alike
-  (docs/results.md, round 10).
+- "capped-area" (DescribeParams' default since round 14, at 12 steps): the same, each face's area
+  capped at the mesh's median face area, so a face larger than usual counts as a usual one: smaller
+  faces (a crowded side) still count for less, a decimated CAD part's few large faces no longer drag
+  their vertices. At 10 steps it is within 0.15 of uniform weights on the organic columns and holds
+  the rigid one (round 13). At 12 steps, served with a vocabulary of the shipped recipe at three
+  seeds, it ties uniform Taubin 10 on SHREC'11 (99.50 against 99.51), its triangulation variant
+  (98.49 both), rigid, scan-like and synthetic shapes, and gains 0.4 under noise (98.62 against
+  98.23, the old defaults' 98.61): docs/results.md, round 14.
+- "uniform" (the default until round 14, at 10 steps): each neighbour by 1
+  (trimesh.smoothing.filter_taubin). It depends on the triangulation: on an irregular mesh it slides
+  vertices along the surface towards their neighbours' centroid and changes the shape by where the
+  vertices were (issue 11). That slide is also why it wins where the other weights lose: two
+  triangulations of one surface come out more alike (docs/results.md, round 10).
 
 `steps` counts single steps, λ then μ then λ ..., for every weighting (trimesh's convention): 10 steps
 are 5 λ|μ pairs. (Until round 10 the cotangent filter counted pairs, so "cotangent Taubin 10" ran
