@@ -1,14 +1,21 @@
-"""A vocabulary's fusion scale belongs to the encoding it was fit for: other encode settings are logged."""
+"""A vocabulary's fusion scale belongs to the encoding it was fit for, and its words to the describe
+parameters: other encode settings, and other describe parameters, are logged."""
 
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from app.core.pipeline import DescribeParams
 from app.core.vocabulary import EncodeParams, Vocabulary
-from app.services.vocabularies import _warn_if_encoded_otherwise
+from app.services.vocabularies import (
+    _warn_if_described_otherwise,
+    _warn_if_encoded_otherwise,
+    describe_changes,
+)
 
 FUSION = {"bof": 0.9, "dna": 45.0, "weight": 1.0, "count": 30}
 
@@ -34,4 +41,43 @@ def test_a_scale_fit_by_area_served_by_count_is_logged(caplog: pytest.LogCapture
 def test_nothing_to_say(metadata: dict, caplog: pytest.LogCaptureFixture) -> None:
     with caplog.at_level(logging.WARNING, logger="app.services.vocabularies"):
         _warn_if_encoded_otherwise(_vocab(**metadata), EncodeParams(), 1)
+    assert caplog.records == []
+
+
+def test_describe_changes_name_each_parameter_that_differs() -> None:
+    fitted = "k=300;smoothing=10;smoothing_weights=uniform;kf.enabled=False"
+    now = "k=300;smoothing=12;smoothing_weights=capped-area;kf.enabled=False;fill_holes=0.05"
+    assert describe_changes(fitted, now) == {
+        "fill_holes": ("?", "0.05"), "smoothing": ("10", "12"),
+        "smoothing_weights": ("uniform", "capped-area")}
+    assert describe_changes(now, now) == {}
+
+
+def test_words_fit_for_other_describe_parameters_are_logged(caplog: pytest.LogCaptureFixture) -> None:
+    """A data directory from before round 14 serves the uniform-Taubin vocabulary it registered; the
+    upgraded process describes with capped-area weights, and says what changed and what to do."""
+    old = replace(DescribeParams(), smoothing=10, smoothing_weights="uniform").fingerprint()
+    with caplog.at_level(logging.WARNING, logger="app.services.vocabularies"):
+        _warn_if_described_otherwise(_vocab(describe=old), DescribeParams().fingerprint(), 3)
+    [record] = caplog.records
+    message = record.getMessage()
+    assert "version 3" in message and "'smoothing_weights': 'uniform'" in message
+    assert "'smoothing_weights': 'capped-area'" in message and "re-ingest" in message
+
+
+@pytest.mark.parametrize("metadata", [{"describe": DescribeParams().fingerprint()}, {}])
+def test_nothing_to_say_about_descriptions(metadata: dict, caplog: pytest.LogCaptureFixture) -> None:
+    # the same parameters, or a rebuilt version (fit on the stored descriptions, no fingerprint kept)
+    with caplog.at_level(logging.WARNING, logger="app.services.vocabularies"):
+        _warn_if_described_otherwise(_vocab(**metadata), DescribeParams().fingerprint(), 1)
+    assert caplog.records == []
+
+
+def test_the_shipped_vocabulary_raises_no_describe_warning_at_the_defaults(
+        caplog: pytest.LogCaptureFixture) -> None:
+    from app.config import Settings
+
+    shipped = Vocabulary.load(Settings().default_vocabulary)
+    with caplog.at_level(logging.WARNING, logger="app.services.vocabularies"):
+        _warn_if_described_otherwise(shipped, Settings().describe.params().fingerprint(), 1)
     assert caplog.records == []
