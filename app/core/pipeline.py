@@ -89,6 +89,11 @@ class DescribeParams:
         return ";".join(parts)
 
 
+def fingerprint_fields(fingerprint: str) -> dict[str, str]:
+    """{name: value} of a DescribeParams.fingerprint() string ("k=300;smoothing=12;kf.enabled=False")."""
+    return dict(part.split("=", 1) for part in fingerprint.split(";") if "=" in part)
+
+
 @dataclass(frozen=True)
 class ShapeDescription:
     """What the index needs of one shape.

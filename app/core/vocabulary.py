@@ -20,7 +20,7 @@ from sklearn.cluster import KMeans
 from app.core.baselines import SHAPE_DNA_COUNT
 from app.core.descriptor import DEFAULT_RUN, dimension, select
 from app.core.fusion import DEFAULT_WEIGHT, FusionScales, dna_vector, fit_scales, fuse
-from app.core.pipeline import ShapeDescription
+from app.core.pipeline import DescribeParams, ShapeDescription, fingerprint_fields
 from app.core.spectrum import first_nonzero
 
 VOCABULARY_FORMAT = 1
@@ -107,6 +107,16 @@ class Vocabulary:
             return {}
         now = params.encoding()
         return {k: (fitted[k], now[k]) for k in now if k in fitted and fitted[k] != now[k]}
+
+    def describe_changes(self, params: DescribeParams) -> dict:
+        """{parameter: (fit, now)} where `params` describe otherwise than the shapes the words were fit
+        on ({} when the fit recorded no describe parameters: a rebuild fits on whatever is stored)."""
+        fitted = self.metadata.get("describe")
+        if not isinstance(fitted, str):
+            return {}
+        old, new = fingerprint_fields(fitted), fingerprint_fields(params.fingerprint())
+        return {k: (old.get(k, "?"), new.get(k, "?")) for k in sorted(old.keys() | new.keys())
+                if old.get(k) != new.get(k)}
 
     def with_fusion(
         self, descriptions: Sequence[ShapeDescription], params: EncodeParams | None = None,

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from app.core.fusion import DEFAULT_WEIGHT
-from app.core.pipeline import ShapeDescription
+from app.core.pipeline import DescribeParams, ShapeDescription
 from app.core.vocabulary import EncodeParams, Vocabulary
 from app.index import new_index
 from app.services.context import ServiceContext
@@ -37,7 +37,7 @@ def load_vocabulary(ctx: ServiceContext, record: VocabularyRecord) -> Vocabulary
             params = version_params(ctx, record, vocab)
             _warn_if_encoded_otherwise(vocab, params, record.id)
             _warn_if_settings_wait(ctx.settings.encode.params(), params, record.id)
-            _warn_if_described_otherwise(vocab, ctx.settings.describe.params().fingerprint(), record.id)
+            _warn_if_described_otherwise(vocab, ctx.settings.describe.params(), record.id)
             _cache[key] = vocab
         return _cache[key]
 
@@ -49,7 +49,7 @@ def _warn_if_encoded_otherwise(vocab: Vocabulary, params: EncodeParams, version:
     if changes:
         log.warning("vocabulary version %d's fusion scale was fit with %s; its vectors are encoded with %s: "
                     "rebuild the vocabulary (POST /admin/vocabulary/rebuild) to refit it", version,
-                    {k: fit for k, (fit, _) in changes.items()}, {k: now for k, (_, now) in changes.items()})
+                    *_fit_and_now(changes))
 
 
 def _warn_if_settings_wait(settings: EncodeParams, version: EncodeParams, version_id: int) -> None:
@@ -60,32 +60,22 @@ def _warn_if_settings_wait(settings: EncodeParams, version: EncodeParams, versio
                     "next vocabulary rebuild (POST /admin/vocabulary/rebuild)", version_id, kept, now)
 
 
-def describe_changes(fitted: str, now: str) -> dict[str, tuple[str, str]]:
-    """{parameter: (value the words were fit for, value this process describes with)} for the
-    parameters that differ between two DescribeParams.fingerprint() strings ("k=300;smoothing=12;...")."""
-    def parse(fingerprint: str) -> dict[str, str]:
-        return dict(part.split("=", 1) for part in fingerprint.split(";") if "=" in part)
-
-    old, new = parse(fitted), parse(now)
-    return {k: (old.get(k, "?"), new.get(k, "?")) for k in sorted(old.keys() | new.keys())
-            if old.get(k) != new.get(k)}
-
-
-def _warn_if_described_otherwise(vocab: Vocabulary, describe_now: str, version: int) -> None:
+def _warn_if_described_otherwise(vocab: Vocabulary, params: DescribeParams, version: int) -> None:
     """Say when a version's words were fit on descriptions made with other describe parameters than
     this process makes (an upgrade that changed the describe defaults, as round 14 of issue 11 did, or
     changed SHAPEBAG_DESCRIBE__*): the models stored before keep their old descriptions, so new uploads
     and queries are compared with shapes described another way until the models are re-ingested."""
-    fitted = vocab.metadata.get("describe")
-    if not isinstance(fitted, str):  # a rebuilt version: fit on whatever the stored descriptions are
-        return
-    changes = describe_changes(fitted, describe_now)
+    changes = vocab.describe_changes(params)
     if changes:
         log.warning("vocabulary version %d was fit on descriptions made with %s; this process describes "
                     "with %s: models ingested before the change keep their old descriptions, so re-ingest "
                     "them and rebuild the vocabulary (POST /admin/vocabulary/rebuild), or set those "
-                    "SHAPEBAG_DESCRIBE__* values back", version,
-                    {k: fit for k, (fit, _) in changes.items()}, {k: now for k, (_, now) in changes.items()})
+                    "SHAPEBAG_DESCRIBE__* values back", version, *_fit_and_now(changes))
+
+
+def _fit_and_now(changes: dict) -> tuple[dict, dict]:
+    """{setting: (fit, now)} -> ({setting: fit}, {setting: now}), the two sides a warning names."""
+    return {k: fit for k, (fit, _) in changes.items()}, {k: now for k, (_, now) in changes.items()}
 
 
 def stored_encoding(record: VocabularyRecord, vocab: Vocabulary) -> dict | None:

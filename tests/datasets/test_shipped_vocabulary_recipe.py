@@ -4,37 +4,39 @@ fit on other descriptors (round 14 found the shipped file 27 training descriptor
 
 from __future__ import annotations
 
+import re
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pytest
-from threadpoolctl import threadpool_limits
 
-from app.config import Settings
+from app.cli import main
 from app.core.vocabulary import Vocabulary
-from app.datasets.folder import read_labelled_folder
 from app.datasets.synthetic import generate
-from app.services.query_pool import describe_bytes
 
-# make vocabulary's corpus and fit (Makefile: VOCAB_CLASSES, VOCAB_PER_CLASS, seed 0, 64 words, run 5)
-CLASSES, PER_CLASS, SEED = 8, 12, 0
+MAKEFILE = Path(__file__).resolve().parents[2] / "Makefile"
+
+
+def _make_variable(name: str) -> int:
+    """A `NAME ?= value` default of the Makefile, which `make vocabulary` generates its corpus with."""
+    found = re.search(rf"^{name}\s*\?=\s*(\d+)\s*$", MAKEFILE.read_text(), re.MULTILINE)
+    assert found, f"{name} is not set in {MAKEFILE}"
+    return int(found.group(1))
 
 
 @pytest.mark.slow
 def test_make_vocabulary_reproduces_the_shipped_vocabulary(tmp_path):
     shipped = Vocabulary.load(str(resources.files("app") / "data" / "vocabulary" / "default"))
-    settings = Settings()
-    params = settings.describe.params()
-    generate(tmp_path / "corpus", classes=CLASSES, per_class=PER_CLASS, seed=SEED)
-    with threadpool_limits(limits=1):  # as the fit's pool processes run (worker.processes.pin_threads)
-        descriptions = [
-            describe_bytes(item.path.read_bytes(), item.path.suffix, params, settings.max_vertices)[0]
-            for item in read_labelled_folder(tmp_path / "corpus")
-        ]
-    seed = int(shipped.metadata["seed"])
-    refit = Vocabulary.fit(descriptions, size=shipped.size, run=shipped.run, seed=seed)
-    refit = refit.with_fusion(descriptions, settings.encode.params(), shipped.fusion.weight)
+    corpus, refit_dir = tmp_path / "corpus-vocab", tmp_path / "vocabulary-default"
+    generate(corpus, classes=_make_variable("VOCAB_CLASSES"), per_class=_make_variable("VOCAB_PER_CLASS"),
+             seed=0)
+    # the recipe's own command, as `make vocabulary` runs it (describe pool, k-means, fusion scales)
+    assert main(["vocabulary", "fit", str(corpus), "--out", str(refit_dir), "--size", str(shipped.size),
+                 "--run", shipped.run, "--seed", str(shipped.metadata["seed"]), "--processes", "2"]) == 0
+    refit = Vocabulary.load(str(refit_dir))
     hint = "the describe code moved the descriptors: refit with `make vocabulary`"
+    assert refit.metadata["describe"] == shipped.metadata["describe"], hint
     assert refit.metadata["trained_on_descriptors"] == shipped.metadata["trained_on_descriptors"], hint
     # the Shape-DNA scale depends on the spectra alone, the centres on k-means over the keypoints
     assert refit.fusion.dna == pytest.approx(shipped.fusion.dna, rel=1e-6), hint

@@ -11,11 +11,7 @@ import pytest
 
 from app.core.pipeline import DescribeParams
 from app.core.vocabulary import EncodeParams, Vocabulary
-from app.services.vocabularies import (
-    _warn_if_described_otherwise,
-    _warn_if_encoded_otherwise,
-    describe_changes,
-)
+from app.services.vocabularies import _warn_if_described_otherwise, _warn_if_encoded_otherwise
 
 FUSION = {"bof": 0.9, "dna": 45.0, "weight": 1.0, "count": 30}
 
@@ -45,12 +41,14 @@ def test_nothing_to_say(metadata: dict, caplog: pytest.LogCaptureFixture) -> Non
 
 
 def test_describe_changes_name_each_parameter_that_differs() -> None:
-    fitted = "k=300;smoothing=10;smoothing_weights=uniform;kf.enabled=False"
-    now = "k=300;smoothing=12;smoothing_weights=capped-area;kf.enabled=False;fill_holes=0.05"
-    assert describe_changes(fitted, now) == {
+    now = DescribeParams()
+    fitted = replace(now, smoothing=10, smoothing_weights="uniform").fingerprint()
+    fitted = fitted.replace("fill_holes=0.05;", "")  # a vocabulary fit before fill_holes existed
+    assert _vocab(describe=fitted).describe_changes(now) == {
         "fill_holes": ("?", "0.05"), "smoothing": ("10", "12"),
         "smoothing_weights": ("uniform", "capped-area")}
-    assert describe_changes(now, now) == {}
+    assert _vocab(describe=now.fingerprint()).describe_changes(now) == {}
+    assert _vocab().describe_changes(now) == {}  # a rebuilt version records no describe parameters
 
 
 def test_words_fit_for_other_describe_parameters_are_logged(caplog: pytest.LogCaptureFixture) -> None:
@@ -58,7 +56,7 @@ def test_words_fit_for_other_describe_parameters_are_logged(caplog: pytest.LogCa
     upgraded process describes with capped-area weights, and says what changed and what to do."""
     old = replace(DescribeParams(), smoothing=10, smoothing_weights="uniform").fingerprint()
     with caplog.at_level(logging.WARNING, logger="app.services.vocabularies"):
-        _warn_if_described_otherwise(_vocab(describe=old), DescribeParams().fingerprint(), 3)
+        _warn_if_described_otherwise(_vocab(describe=old), DescribeParams(), 3)
     [record] = caplog.records
     message = record.getMessage()
     assert "version 3" in message and "'smoothing_weights': 'uniform'" in message
@@ -69,7 +67,7 @@ def test_words_fit_for_other_describe_parameters_are_logged(caplog: pytest.LogCa
 def test_nothing_to_say_about_descriptions(metadata: dict, caplog: pytest.LogCaptureFixture) -> None:
     # the same parameters, or a rebuilt version (fit on the stored descriptions, no fingerprint kept)
     with caplog.at_level(logging.WARNING, logger="app.services.vocabularies"):
-        _warn_if_described_otherwise(_vocab(**metadata), DescribeParams().fingerprint(), 1)
+        _warn_if_described_otherwise(_vocab(**metadata), DescribeParams(), 1)
     assert caplog.records == []
 
 
@@ -77,7 +75,8 @@ def test_the_shipped_vocabulary_raises_no_describe_warning_at_the_defaults(
         caplog: pytest.LogCaptureFixture) -> None:
     from app.config import Settings
 
-    shipped = Vocabulary.load(Settings().default_vocabulary)
+    settings = Settings()
+    shipped = Vocabulary.load(settings.default_vocabulary)
     with caplog.at_level(logging.WARNING, logger="app.services.vocabularies"):
-        _warn_if_described_otherwise(shipped, Settings().describe.params().fingerprint(), 1)
+        _warn_if_described_otherwise(shipped, settings.describe.params(), 1)
     assert caplog.records == []
