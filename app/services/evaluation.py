@@ -54,6 +54,8 @@ class EvaluationOptions:
     time_range: str = DescribeParams.time_range  # weyl | spectrum (the paper's t_min)
     smoothing: int = DescribeParams.smoothing  # Taubin steps (λ, μ, λ ...)
     smoothing_weights: str = DescribeParams.smoothing_weights  # one of smoothing.WEIGHTS
+    smoothing_target: float = DescribeParams.smoothing_target  # > 0: adaptive, to this roughness
+    smoothing_max: int = DescribeParams.smoothing_max  # adaptive smoothing's most steps
     fill_holes: float = DescribeParams.fill_holes  # largest cap closed, fraction of the area
     laplacian: str = DescribeParams.laplacian  # cotangent | intrinsic (intrinsic Delaunay)
     remesh: bool = DescribeParams.remesh  # isotropic remeshing at the canonical resolution
@@ -103,7 +105,8 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
     try:
         base = DescribeParams(
             k=options.k, target_vertices=options.target_vertices, time_range=options.time_range,
-            smoothing=options.smoothing,
+            smoothing=options.smoothing, smoothing_target=options.smoothing_target,
+            smoothing_max=options.smoothing_max,
             smoothing_weights=options.smoothing_weights, laplacian=options.laplacian, remesh=options.remesh,
             subdivision=options.subdivision, fill_holes=options.fill_holes, keypoint_filter=flt,
         )
