@@ -60,3 +60,37 @@ def test_ingest_is_resumable_then_search_ranks_and_show_lists(folder, tmp_path, 
     assert main(["vocabulary", "show", "--data-dir", str(data)]) == 0
     assert "* v1: 8 words" in capsys.readouterr().out
     assert main(["search", str(tmp_path / "absent.obj"), "--data-dir", str(data)]) == 2
+
+
+@pytest.mark.parametrize("command", ["serve", "demo"])
+def test_a_busy_port_is_refused_before_anything_starts(command, tmp_path, capsys, monkeypatch):
+    import socket
+
+    import app.main
+    from app.datasets import synthetic
+
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("started although the port is taken")
+
+    monkeypatch.setattr(app.main, "create_app", must_not_run)
+    monkeypatch.setattr(synthetic, "generate", must_not_run)
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        argv = [command, "--data-dir", str(tmp_path / "d"), "--port", str(port)]
+        code = main(argv + (["--dev"] if command == "serve" else []))
+    err = capsys.readouterr().err
+    assert code == 2 and f"cannot listen on 127.0.0.1:{port}" in err and "--port" in err
+    assert not (tmp_path / "d" / "corpus").exists()
+
+
+def test_a_free_port_passes_the_check():
+    import socket
+
+    from app.commands.serve import check_port_free
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    check_port_free("127.0.0.1", port)  # free again once closed: no error
