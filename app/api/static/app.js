@@ -50,7 +50,7 @@ function el(tag, attrs = {}, ...children) {
 
 const thumbUrl = (id) => `/models/${id}/thumbnail.png`;
 const fmtSeconds = (s) => (s >= 1 ? `${s.toFixed(2)} s` : `${Math.max(1, Math.round(s * 1000))} ms`);
-const fmtBytes = (n) => (n > 1048576 ? `${(n / 1048576).toFixed(1)} MB` : `${Math.ceil(n / 1024)} KB`);
+const fmtBytes = (n) => (n > 1048576 ? `${(n / 1048576).toFixed(1)} MiB` : `${Math.ceil(n / 1024)} KiB`);  // binary units, as the 413 says
 
 function thumb(src, alt, lazy = false) {
   // a placeholder until the server's rendering arrives (the first one of a model takes a moment), and
