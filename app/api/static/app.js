@@ -315,7 +315,15 @@ function route() {
   else selectTab(name === "browse" ? "browse" : "search");
 }
 
+function trackTopbarHeight() {  // style.css's scroll margins clear the sticky bar at its real height
+  const bar = document.querySelector(".topbar");
+  const update = () => document.documentElement.style.setProperty("--topbar-height", `${bar.offsetHeight}px`);
+  update();
+  new ResizeObserver(update).observe(bar);
+}
+
 function init() {
+  trackTopbarHeight();
   for (const tab of document.querySelectorAll(".tab[data-tab]")) {
     tab.addEventListener("click", () => selectTab(tab.dataset.tab));
   }
