@@ -34,23 +34,20 @@ class DescribeParams:
     k: int = 300  # eigenpairs
     m: int = 100  # time scales
     # t_min from the computed λ_k (the paper's). "weyl" (λ_k ≈ 4πk) is the same for every triangulation
-    # and wins without smoothing, but loses 8 points on the triangulation variant once the mesh is
-    # smoothed (docs/results.md)
+    # and helps unsmoothed meshes, but once the mesh is smoothed it retrieves worse across
+    # triangulations (docs/results.md)
     time_range: str = "spectrum"
     target_vertices: int = 1000  # canonical resolution; 0 keeps the input resolution
-    # Taubin steps (λ, μ, λ ...: 12 = 6 pairs) at the canonical resolution; 0 = none. With capped-area
-    # weights, 12 steps hold the old defaults' noise figure (98.6 fused, served and self-fit) where
-    # uniform Taubin 10 lost 0.4, and tie it on SHREC'11, its triangulation variant, rigid, scan-like
-    # and synthetic shapes (docs/results.md, round 14); past 12 the triangulation variant pays for the
-    # noise, and 40 uniform steps (the old default) cost 6-8 points on decimated scans
+    # Taubin steps (λ, μ, λ ...: 12 = 6 pairs) at the canonical resolution; 0 = none. Enough to absorb
+    # vertex noise without losing on any other collection; more smoothing helps noisy queries but costs
+    # on other triangulations and decimated scans (docs/results.md)
     smoothing: int = 12
     # capped-area (the default), area, intrinsic, cotangent or uniform Taubin weights
     # (app.core.smoothing). capped-area: each neighbour by the area of the faces on its edge, each face
     # counted at most as the mesh's median face: intrinsic (face areas), so a crowded side does not pull,
-    # and a CAD part's few large faces do not drag their vertices. The surface's cotangent weights do
-    # not even out a triangulation at all: intrinsic weights lose 5.0 fused on SHREC'11's triangulation
-    # variant and 6.0 on noisy synthetic shapes (round 10); plain area weights lose 2.7 on the rigid
-    # column (round 12); uniform weights (the default until round 14) depend on the connectivity
+    # and a CAD part's few large faces do not drag their vertices. It is the weighting that held on every
+    # collection measured: cotangent weights do not even out a triangulation, uncapped areas lose on
+    # rigid parts, uniform weights depend on the connectivity (docs/results.md)
     smoothing_weights: str = "capped-area"
     # > 0: smoothing is adaptive: Taubin pairs until the canonical mesh's roughness (app.core.roughness)
     # is at most this, `smoothing` steps at most; 0: exactly `smoothing` steps
@@ -60,12 +57,13 @@ class DescribeParams:
     # Delaunay mesh, far less dependent on the triangulation elsewhere) | cotangent (the paper's)
     laplacian: str = "intrinsic"
     # isotropic remeshing at the canonical resolution (app.core.remeshing): triangulation-proof, but it
-    # spends vertices on the area that noise adds (noise variant: -23 points); an option
+    # spends vertices on the area that noise adds, so noisy queries retrieve far worse; an option
     remesh: bool = False
     subdivision: str = "midpoint"  # how coarse meshes reach the canonical resolution: midpoint | loop
     # close each boundary loop whose centroid cap adds at most this fraction of its piece's area
-    # (app.core.holes); 0 leaves every hole open. Scan-like open shapes (benchmarks/scans.py): +8.8
-    # points pure, +4.4 fused; closed meshes are untouched (docs/results.md, round 8)
+    # (app.core.holes); 0 leaves every hole open. A scanner's holes reflect the heat at their rims and
+    # change the signature; closing the small ones helps scan-like shapes and leaves closed meshes
+    # untouched (docs/results.md)
     fill_holes: float = 0.05
     solver: str = "auto"  # auto | dense | sparse
     keypoint_filter: KeypointFilter = field(default_factory=KeypointFilter)
@@ -179,7 +177,7 @@ def _from_canonical(fine: Mesh, input_vertices: int, params: DescribeParams,
     # resampling and smoothing are scale-free: one normalisation, after them, gives unit area
     smoothed = smooth(fine, input_vertices, params)
     # remeshing after smoothing: an even sampling of a noisy surface spends its vertices on the
-    # noise's extra area (SHREC'11 noise variant: -23 points when remeshed first)
+    # noise's extra area (remeshing first loses badly on noisy queries: docs/results.md)
     if params.remesh:
         smoothed = isotropic_remesh(smoothed, params.target_vertices)
     work = normalize_scale(smoothed)

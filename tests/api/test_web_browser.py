@@ -186,6 +186,22 @@ def test_browse_filter_similar_and_error_message(served: str, corpus) -> None:
         ids = [int(x) for x in page.locator("#similar-results .card.hit").evaluate_all(
             "cards => cards.map(c => c.dataset.modelId)")]
         assert ids and model_id not in ids
+        # from the bottom of a grid taller than the window, a click scrolls up to the similar models with
+        # their heading below the sticky top bar, not under it
+        page.set_viewport_size({"width": 1280, "height": 480})
+        page.evaluate("window.scrollTo(0, document.body.scrollHeight)")
+        last = page.locator("#grid .card.model").last
+        name = last.locator(".name").text_content()
+        last.click()
+        page.wait_for_function(
+            "(name) => document.querySelector('#similar-results .card.query .name')?.textContent === name",
+            arg=name,
+        )
+        page.wait_for_timeout(800)  # let the smooth scroll settle before measuring
+        top = page.evaluate("document.querySelector('#similar-results h2').getBoundingClientRect().top")
+        bar = page.evaluate("document.querySelector('.topbar').getBoundingClientRect().bottom")
+        assert top >= bar, f"the sticky header ({bar}px) covers the similar models' heading ({top}px)"
+        page.set_viewport_size(VIEWPORT)
 
         # a broken upload: the API's message is shown, nothing else breaks
         page.click("#tab-search")
