@@ -2,6 +2,7 @@
 
     python -m benchmarks.highres OUT --kind fine        [--per-class 10] [--seed 0] [--holes 0,2]
     python -m benchmarks.highres OUT --kind characters  [--per-class 10] [--seed 0]
+    python -m benchmarks.highres OUT --kind kin-characters  [--per-class 10] [--seed 0]
 
 **fine**: full-resolution scans of kin shapes. Nine classes share two body plans (six quadrupeds, three
 bipeds) and differ only by small parts: ears up or down, a snout, horns, a hump, a bushy tail; a nose,
@@ -160,13 +161,21 @@ def _capsule_surface_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, r0: f
     return np.linalg.norm(p - (a + t[:, None] * ab), axis=1) - (r0 + (r1 - r0) * t)
 
 
-def character_template(plan: str, rng: np.random.Generator, grid: int = GRID,
-                       vertex_range: tuple[int, int] = CHARACTER_VERTICES) -> tuple[Mesh, list[Segment]]:
-    """The rest pose of a plan at a random resolution, and its rest segments."""
+def character_template(
+    name: str, rng: np.random.Generator, grid: int = GRID, vertex_range: tuple[int, int] = CHARACTER_VERTICES
+) -> tuple[Mesh, list[Segment], list[int]]:
+    """The rest pose of a character at a random resolution: a plan's name (CHARACTER_PLANS) or a kin
+    class's (KIN, with its small parts). Returns the mesh, its rest capsules and, for each capsule,
+    the plan segment whose motion it follows (itself, or the segment a part is fixed to)."""
+    plan, parts = KIN.get(name, (name, []))
     chains = PLANS[plan]()
     rest = _rest_segments(chains)
+    starts = list(np.cumsum([0] + [len(c.lengths) for c in chains])[:-1])
+    frames = [(np.asarray(seg[0], dtype=float), np.eye(3)) for seg in rest]
+    carriers = list(range(len(rest))) + [starts[p.chain] + p.segment for p in parts]
+    rest = rest + posed_parts(parts, rest, frames, starts, np.random.default_rng(0))
     v, f = surface(rest, grid=grid, max_vertices=None)
-    return _decimate(clean(Mesh(v, f)), _log_uniform(rng, vertex_range)), rest
+    return _decimate(clean(Mesh(v, f)), _log_uniform(rng, vertex_range)), rest, carriers
 
 
 def _rest_segments(chains: list) -> list[Segment]:
@@ -193,27 +202,30 @@ def generate(out: Path | str, kind: str = "fine", per_class: int = 10, seed: int
                               vertex_range=fine_range)
 
         return write_labelled(Path(out), list(KIN), per_class, make)
-    if kind != "characters":
-        raise ValueError(f"kind must be fine or characters, not {kind!r}")
+    if kind not in ("characters", "kin-characters"):
+        raise ValueError(f"kind must be fine, characters or kin-characters, not {kind!r}")
+    names = list(KIN) if kind == "kin-characters" else list(CHARACTER_PLANS)
     templates = {}
-    for c, plan in enumerate(CHARACTER_PLANS):
-        templates[plan] = character_template(plan, np.random.default_rng([seed, c, 31]), grid=grid,
+    for c, name in enumerate(names):
+        templates[name] = character_template(name, np.random.default_rng([seed, c, 31]), grid=grid,
                                              vertex_range=vertex_range or CHARACTER_VERTICES)
 
-    def pose_character(c: int, plan: str, i: int) -> Mesh:
+    def pose_character(c: int, name: str, i: int) -> Mesh:
         rng = np.random.default_rng([seed, c, i, 32])
-        template, rest = templates[plan]
+        template, rest, carriers = templates[name]
+        plan = KIN[name][0] if name in KIN else name
         segments, frames = pose_frames(PLANS[plan](), rng, jitter=False)
-        posed = Mesh(skin(template.vertices, rest, frames, segments), template.faces)
+        moved = [segments[k] for k in carriers]  # a part moves with the segment that carries it
+        posed = Mesh(skin(template.vertices, rest, [frames[k] for k in carriers], moved), template.faces)
         return _random_motion(posed, rng)
 
-    return write_labelled(Path(out), list(CHARACTER_PLANS), per_class, pose_character)
+    return write_labelled(Path(out), names, per_class, pose_character)
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("out")
-    p.add_argument("--kind", choices=("fine", "characters"), default="fine")
+    p.add_argument("--kind", choices=("fine", "characters", "kin-characters"), default="fine")
     p.add_argument("--per-class", type=int, default=10)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--holes", default="0,2", help="MIN,MAX discs cut out per shape (fine)")

@@ -13,6 +13,8 @@ from app.datasets.bodyplans import PLANS
 from app.datasets.folder import read_labelled_folder
 from benchmarks.highres import KIN, _rest_segments, fine_shape, generate, skin
 
+pytestmark = pytest.mark.slow  # marching cubes of 20 bodies: ~40 s on 2 cores
+
 SMALL = {"grid": 60, "vertex_range": (1_500, 2_000)}  # coarse and quick; the column uses grid 220
 
 
@@ -47,12 +49,13 @@ def test_kin_classes_share_a_body_and_differ_by_small_parts(kin):
     assert max(quadrupeds) / min(quadrupeds) < 1.6 and max(people) / min(people) < 1.6
 
 
-def test_characters_of_a_class_share_the_template_and_are_posed_isometrically(tmp_path: Path):
-    out = generate(tmp_path / "d", "characters", per_class=2, seed=0, **SMALL)
+@pytest.mark.parametrize(("kind", "classes"), [("characters", 5), ("kin-characters", len(KIN))])
+def test_characters_of_a_class_share_the_template_and_are_posed_isometrically(tmp_path: Path, kind, classes):
+    out = generate(tmp_path / "d", kind, per_class=2, seed=0, **SMALL)
     by_class: dict[str, list] = {}
     for r in read_labelled_folder(out):
         by_class.setdefault(r.label, []).append(load_mesh(r.path))
-    assert len(by_class) == 5
+    assert len(by_class) == classes
     for first, second in by_class.values():
         np.testing.assert_array_equal(first.faces, second.faces)  # one template, other poses
         assert not np.allclose(first.vertices, second.vertices)
