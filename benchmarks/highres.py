@@ -6,8 +6,8 @@
 
 **fine**: full-resolution scans of kin shapes. Nine classes share two body plans (six quadrupeds, three
 bipeds) and differ only by small parts: ears up or down, a snout, horns, a hump, a bushy tail; a nose,
-a hair bun, a belly. Within a class, shapes differ by pose and by +-8 % in each limb's length and
-thickness (app.datasets.synthetic.pose). The small parts are 2-4 edges of a 1,000-vertex mesh across:
+a hair bun, a belly. Within a class, shapes differ by pose only (one subject scanned in several
+poses; limbs keep their length and thickness). The small parts are 2-4 edges of a 1,000-vertex mesh across:
 what tells a cat from a dog at the canonical resolution. Each surface is extracted by marching cubes
 on a fine grid, decimated to 15k-50k vertices (log-uniform), cut by 0-2 holes (the largest piece
 kept), moved and rescaled at random.
@@ -24,14 +24,14 @@ scanner puts it. Write OUT outside the repository (var/ is ignored); the meshes 
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from app.core.mesh import Mesh, clean
-from app.datasets.bodyplans import PLANS
+from app.datasets.bodyplans import PLANS, Chain
 from app.datasets.synthetic import Frame, Segment, pose_frames, surface
 from benchmarks.scans import _decimate, _with_holes
 from benchmarks.variants import write_labelled
@@ -94,29 +94,65 @@ KIN: dict[str, tuple[str, list[Part]]] = {
 
 
 def posed_parts(parts: list[Part], segments: list[Segment], frames: list[Frame], chain_starts: list[int],
-                rng: np.random.Generator) -> list[Segment]:
-    """Each part as a capsule carried by its segment's rigid frame, its size jittered by +-10 %."""
+                anchors: list[np.ndarray], rng: np.random.Generator) -> list[Segment]:
+    """Each part as a capsule carried by its segment's rigid frame, its size jittered by +-10 %.
+    anchors: each segment's start in the rest pose of the plan as PLANS defines it (parts are placed
+    there, whatever the class's proportions)."""
     out: list[Segment] = []
     for part in parts:
         s = chain_starts[part.chain] + part.segment
-        rest_start, rot = frames[s]
+        rot = frames[s][1]
         size = rng.uniform(0.9, 1.1)
         direction = np.asarray(part.direction, dtype=float)
         direction /= np.linalg.norm(direction)
-        root = np.asarray(segments[s][0]) + rot @ (np.asarray(part.at, dtype=float) - rest_start)
+        root = np.asarray(segments[s][0]) + rot @ (np.asarray(part.at, dtype=float) - anchors[s])
         out.append((root, root + rot @ direction * part.length * size,
                     part.radii[0] * size, part.radii[1] * size))
     return out
 
 
+# Each kin class's own proportions, as (chain, segment or None for the whole chain) -> (length scale,
+# radius scale): kin differ in build as well as in small parts (a camel's legs and neck, a bull's
+# bulk, a slim and a broad person). Quadruped chains: 0 body, 1-4 legs, 5 neck (segment 1 the head,
+# never scaled: parts sit on it), 6 tail; biped: 0 torso, 1 head, 2 neck, 3-4 arms, 5-6 legs.
+# A chain that carries a part keeps its radius.
+_LEGS4 = (1, 2, 3, 4)
+PROPORTIONS: dict[str, dict[tuple[int, int | None], tuple[float, float]]] = {
+    "cat": {**{(c, None): (0.85, 0.85) for c in _LEGS4}, (5, 0): (0.8, 1.0), (6, None): (1.3, 0.85)},
+    "dog": {},
+    "wolf": {**{(c, None): (1.1, 1.0) for c in _LEGS4}, (0, None): (1.1, 1.1), (6, None): (1.1, 1.0)},
+    "goat": {**{(c, None): (0.9, 0.9) for c in _LEGS4}, (5, 0): (1.15, 0.9), (0, None): (0.9, 1.0)},
+    "camel": {**{(c, None): (1.3, 0.9) for c in _LEGS4}, (5, 0): (1.45, 0.9)},
+    "bull": {**{(c, None): (0.85, 1.3) for c in _LEGS4}, (5, 0): (0.75, 1.3)},
+    "person_a": {},
+    "person_b": {**{(c, None): (1.08, 0.82) for c in (3, 4, 5, 6)}, (0, None): (1.0, 0.88)},
+    "person_c": {**{(c, None): (0.95, 1.2) for c in (3, 4, 5, 6)}, (2, None): (0.8, 1.2)},
+}
+
+
+def kin_chains(name: str) -> tuple[list[Chain], list[np.ndarray]]:
+    """The kin class's chains (its plan in its own proportions) and the plan's rest segment starts."""
+    plan = KIN[name][0] if name in KIN else name
+    base = PLANS[plan]()
+    scales = PROPORTIONS.get(name, {})
+    chains = []
+    for c, chain in enumerate(base):
+        lengths, radii = list(chain.lengths), list(chain.radii)
+        for s in range(len(lengths)):
+            ls, rs = scales.get((c, s), scales.get((c, None), (1.0, 1.0)))
+            lengths[s], radii[s] = lengths[s] * ls, (radii[s][0] * rs, radii[s][1] * rs)
+        chains.append(replace(chain, lengths=tuple(lengths), radii=tuple(radii)))
+    return chains, [np.asarray(seg[0], dtype=float) for seg in _rest_segments(base)]
+
+
 def fine_shape(name: str, rng: np.random.Generator, holes: tuple[int, int] = (0, 2),
                grid: int = GRID, vertex_range: tuple[int, int] = FINE_VERTICES) -> Mesh:
     """One member of a kin class: posed plan plus its small parts, at full resolution."""
-    plan, parts = KIN[name]
-    chains = PLANS[plan]()
-    segments, frames = pose_frames(chains, rng)
+    parts = KIN[name][1]
+    chains, anchors = kin_chains(name)
+    segments, frames = pose_frames(chains, rng, jitter=False)  # one body per class, as a scanned subject
     starts = list(np.cumsum([0] + [len(c.lengths) for c in chains])[:-1])
-    segments = segments + posed_parts(parts, segments, frames, starts, rng)
+    segments = segments + posed_parts(parts, segments, frames, starts, anchors, rng)
     v, f = surface(segments, grid=grid, max_vertices=None)
     mesh = _random_motion(Mesh(v, f), rng)
     if holes[1] > 0:
@@ -167,13 +203,13 @@ def character_template(
     """The rest pose of a character at a random resolution: a plan's name (CHARACTER_PLANS) or a kin
     class's (KIN, with its small parts). Returns the mesh, its rest capsules and, for each capsule,
     the plan segment whose motion it follows (itself, or the segment a part is fixed to)."""
-    plan, parts = KIN.get(name, (name, []))
-    chains = PLANS[plan]()
+    parts = KIN[name][1] if name in KIN else []
+    chains, anchors = kin_chains(name)
     rest = _rest_segments(chains)
     starts = list(np.cumsum([0] + [len(c.lengths) for c in chains])[:-1])
     frames = [(np.asarray(seg[0], dtype=float), np.eye(3)) for seg in rest]
     carriers = list(range(len(rest))) + [starts[p.chain] + p.segment for p in parts]
-    rest = rest + posed_parts(parts, rest, frames, starts, np.random.default_rng(0))
+    rest = rest + posed_parts(parts, rest, frames, starts, anchors, np.random.default_rng(0))
     v, f = surface(rest, grid=grid, max_vertices=None)
     return _decimate(clean(Mesh(v, f)), _log_uniform(rng, vertex_range)), rest, carriers
 
@@ -213,8 +249,7 @@ def generate(out: Path | str, kind: str = "fine", per_class: int = 10, seed: int
     def pose_character(c: int, name: str, i: int) -> Mesh:
         rng = np.random.default_rng([seed, c, i, 32])
         template, rest, carriers = templates[name]
-        plan = KIN[name][0] if name in KIN else name
-        segments, frames = pose_frames(PLANS[plan](), rng, jitter=False)
+        segments, frames = pose_frames(kin_chains(name)[0], rng, jitter=False)
         moved = [segments[k] for k in carriers]  # a part moves with the segment that carries it
         posed = Mesh(skin(template.vertices, rest, [frames[k] for k in carriers], moved), template.faces)
         return _random_motion(posed, rng)
