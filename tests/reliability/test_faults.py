@@ -229,8 +229,9 @@ def test_each_swap_prunes_versions_nobody_serves_including_one_left_by_a_killed_
     with ctx.db.read() as conn:
         first = vocab_repo.active(conn).id
         ready = len(models_repo.ready_ids(conn))
-    orphan = vocabularies.register(ctx, Vocabulary.fit_features(np.random.default_rng(0).random((50, 4)),
-                                                                size=8), activate=False)
+    orphan = vocabularies.register(
+        ctx, Vocabulary.fit_features(np.random.default_rng(0).random((50, 4)), size=8), activate=False
+    )
     with ctx.db.write() as conn:  # the killed rebuild had stored some vectors too
         vocab_repo.put_vector(conn, models_repo.ready_ids(conn)[0], orphan, np.ones(8, np.float32))
     assert ctx.vocabulary_dir(orphan).is_dir() and bof_rows(orphan) == 1
