@@ -38,7 +38,7 @@ from tests.reliability.helpers import (
 )
 
 pytestmark = pytest.mark.slow
-TOKEN = {"X-Admin-Token": "reliability-secret"}
+TOKEN = {"X-Admin-Token": "reliability-secret-kkkkkkkkkkkkk"}
 HOOKS = Path(__file__).resolve().parent / "hooks"
 
 

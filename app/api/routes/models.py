@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import mimetypes
-from typing import Annotated
+from typing import Annotated, Literal
 
 from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
@@ -31,10 +31,14 @@ ERRORS: dict[int | str, dict] = {c: {"model": ErrorResponse} for c in (404, 413,
 WRITE_ERRORS = {**ERRORS, 401: ERRORS[404]}
 
 UPLOAD_BODY = multipart_body(
-    "OBJ/OFF/PLY/STL/GLB",
-    name={"type": "string"},
-    label={"type": "string"},
-    metadata={"type": "string", "description": "a JSON object"},
+    "the mesh file",
+    name={"type": "string", "minLength": 1, "maxLength": limits.MAX_TEXT_CHARS},
+    label={"type": "string", "minLength": 1, "maxLength": 100},
+    metadata={
+        "type": "string",
+        "description": "a JSON object",
+        "maxLength": metadata.MAX_METADATA_BYTES,
+    },
 )
 
 
@@ -98,7 +102,7 @@ def _duplicate(result: ingestion.Submitted, name: str | None, label: str | None)
 def list_models(
     ctx: CtxDep,
     label: str | None = None,
-    status: str | None = Query(None, description="queued | ready | failed"),
+    status: Literal["queued", "ready", "failed"] | None = None,  # catalog.STATUSES
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     offset: limits.OffsetQuery = 0,
 ) -> ModelsPublic:
