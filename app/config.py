@@ -69,6 +69,15 @@ class EncodeSettings(BaseModel):
         return EncodeParams(**self.model_dump())  # normalize keeps its default (True)
 
 
+class StorageSettings(BaseModel):
+    """Room on the data directory (SHAPEBAG_STORAGE__MIN_FREE_MB=1024 ...): under the floor, or past the
+    quota, writes answer 507 before the disk (and SQLite) fills; reads and DELETE keep working."""
+
+    min_free_mb: int = Field(default=512, ge=0)  # free space the filesystem keeps; 0: no floor
+    quota_mb: int = Field(default=0, ge=0)  # bytes under data_dir (meshes, descriptions, database); 0: none
+    measure_interval_s: float = Field(default=10.0, ge=0)  # how stale the quota's count of bytes may be
+
+
 class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="SHAPEBAG_", env_nested_delimiter="__", extra="ignore")
 
@@ -105,6 +114,7 @@ class Settings(BaseSettings):
     default_vocabulary: Path | None = SHIPPED_VOCABULARY
     describe: DescribeSettings = Field(default_factory=DescribeSettings)
     encode: EncodeSettings = Field(default_factory=EncodeSettings)
+    storage: StorageSettings = Field(default_factory=StorageSettings)
 
     @field_validator("default_vocabulary", mode="before")
     @classmethod

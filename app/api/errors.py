@@ -27,6 +27,7 @@ STATUS: dict[type[e.ServiceError], int] = {
     e.ConflictError: 409,
     e.DescribeTimeoutError: 504,
     e.DescribeCrashedError: 503,
+    e.InsufficientStorageError: 507,
 }
 RETRY_AFTER_S = 5
 HTTP_CODES = {401: "unauthorized", 404: "not_found", 405: "method_not_allowed", 413: "payload_too_large"}

@@ -8,6 +8,7 @@ from fastapi import APIRouter, Body, status
 
 from app.api.deps import AdminDep, CtxDep, RuntimeDep
 from app.api.schemas import ErrorResponse, JobAccepted, VocabularyPublic, VocabularyRebuild
+from app.api.space import RoomDep
 from app.core.descriptor import RUNS
 from app.services import maintenance
 from app.services.errors import InvalidInputError
@@ -22,7 +23,7 @@ def _enqueue(ctx, kind: str, payload: dict) -> JobAccepted:
 
 @router.post("/vocabulary/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted)
 def rebuild_vocabulary(
-    _: AdminDep, ctx: CtxDep, body: Annotated[VocabularyRebuild | None, Body()] = None
+    _: AdminDep, __: RoomDep, ctx: CtxDep, body: Annotated[VocabularyRebuild | None, Body()] = None
 ) -> JobAccepted:
     """Fit a new vocabulary on the stored descriptions, re-encode, re-index, swap (a job)."""
     body = body or VocabularyRebuild(size=ctx.settings.vocabulary_size, run=ctx.settings.vocabulary_run)
@@ -32,7 +33,7 @@ def rebuild_vocabulary(
 
 
 @router.post("/index/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted)
-def rebuild_index(_: AdminDep, ctx: CtxDep) -> JobAccepted:
+def rebuild_index(_: AdminDep, __: RoomDep, ctx: CtxDep) -> JobAccepted:
     """Re-encode every model with the active vocabulary from its cached description (a job)."""
     return _enqueue(ctx, "rebuild_index", {})
 

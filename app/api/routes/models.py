@@ -22,6 +22,7 @@ from app.api.schemas import (
     SearchHit,
     SearchResponse,
 )
+from app.api.space import RoomDep
 from app.api.uploads import multipart_body, read_form
 from app.services import catalog, ingestion, maintenance, metadata, rendering, search
 from app.services.errors import InvalidInputError, NotFoundError
@@ -52,7 +53,7 @@ UPLOAD_BODY = multipart_body(
     },  # compressed body, time limit, disk
     openapi_extra=UPLOAD_BODY,
 )
-async def upload_model(request: Request, runtime: RuntimeDep, _: UploadDep) -> JSONResponse:
+async def upload_model(request: Request, runtime: RuntimeDep, _: UploadDep, __: RoomDep) -> JSONResponse:
     """Store a mesh and queue its ingestion (202); identical content answers 200 with the existing model."""
     ctx = runtime.ctx
     form = await read_form(request, ctx.settings.max_upload_bytes)
@@ -112,7 +113,9 @@ def list_models(
 
 @router.get("/{model_id}", response_model=ModelPublic, responses=ERRORS)
 def get_model(model_id: IdPath, ctx: CtxDep) -> ModelPublic:
-    return ModelPublic.of(catalog.get_model(ctx, model_id))
+    model = catalog.get_model(ctx, model_id)
+    stored = ctx.blobs.model_bytes(model.id, model.sha256, model.file_type)
+    return ModelPublic.of(model).model_copy(update={"stored_bytes": stored})
 
 
 @router.get("/{model_id}/mesh", responses=ERRORS, response_class=FileResponse)
