@@ -80,12 +80,12 @@ def expand(
     return total
 
 
-def check(total: Totals, what: str, budget: Budget) -> None:
+def check(total: Totals, what: str, budget: Budget, max_placements: int = MAX_PLACEMENTS) -> None:
     """Refuse a scene whose expansion places too many meshes or too many vertices or faces."""
     where = f"the {what} (each part counted once per placement)"
-    if total.placements > MAX_PLACEMENTS:
+    if total.placements > max_placements:
         raise InvalidMeshError(
-            f"{where} places {total.placements} meshes, more than the limit of {MAX_PLACEMENTS}:"
+            f"{where} places {total.placements} meshes, more than the limit of {max_placements}:"
             " merge the instances into one mesh and export again"
         )
     budget.vertices(total.vertices, where)
