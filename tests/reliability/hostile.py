@@ -249,3 +249,29 @@ def many_nodes_zip(n: int) -> bytes:
 def many_primitives_zip(n: int) -> bytes:
     doc, binary = _tetra_gltf(meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}] * n}])
     return zipped_gltf(doc, binary)
+
+
+# --- XML entities ------------------------------------------------------------------------------------
+
+
+def _laughs(root: str) -> str:
+    """A DOCTYPE whose entity j expands to 10**9 'a's, and an external entity naming /etc/passwd."""
+    chain = "".join(f'<!ENTITY {chr(98 + i)} "' + f"&{chr(97 + i)};" * 10 + '">' for i in range(9))
+    return f'<?xml version="1.0"?><!DOCTYPE {root} [<!ENTITY a "aaaaaaaaaa">{chain}<!ENTITY x SYSTEM "file:///etc/passwd">]>'
+
+
+def billion_laughs_3mf() -> bytes:
+    objects = [f'<object id="1" type="model" name="&j;&x;">{_tetra_3mf_mesh()}</object>']
+    model = threemf(objects, '<item objectid="1"/>')
+    with zipfile.ZipFile(io.BytesIO(model)) as z:
+        text = (
+            z.read("3D/3dmodel.model")
+            .decode()
+            .replace('<?xml version="1.0" encoding="UTF-8"?>', _laughs("model"))
+        )
+        return zip_members({"_rels/.rels": z.read("_rels/.rels"), "3D/3dmodel.model": text})
+
+
+def billion_laughs_dae() -> bytes:
+    text = tetrahedron_dae().decode().replace('<?xml version="1.0" encoding="utf-8"?>', _laughs("COLLADA"))
+    return text.replace('<node id="top">', '<node id="top" name="&j;&x;">').encode()

@@ -126,6 +126,7 @@ def _read(
         raise InvalidMeshError(f"the {what} file holds no triangle mesh (it has no meshes)")
     try:
         _check_extensions(doc)
+        _check_declared(doc)
         buffers = _buffers(doc, chunk, files, what, budget)
         _check_views(doc, buffers)
         _check_counts(doc, budget)
@@ -225,9 +226,7 @@ def _check_counts(doc: dict, budget: Budget) -> None:
     """Declared sizes before anything is built: nodes, accessors and primitives, their types, and the
     meshes, vertices and faces of the whole scene, each mesh counted once per node instance."""
     accessors = doc.get("accessors", [])
-    graph.check_declared(len(doc.get("nodes", [])), "nodes", "glTF file")
-    graph.check_declared(len(accessors), "accessors", "glTF file")
-    graph.check_declared(sum(len(m.get("primitives", [])) for m in doc["meshes"]), "primitives", "glTF file")
+    _check_declared(doc)
     per_mesh = []
     for mesh in doc["meshes"]:
         total = graph.Totals()
@@ -242,6 +241,13 @@ def _check_counts(doc: dict, budget: Budget) -> None:
             instances[i] * m.placements, instances[i] * m.vertices, instances[i] * m.faces
         )
     graph.check(total, "glTF scene", budget)
+
+
+def _check_declared(doc: dict) -> None:
+    """Nodes, accessors and primitives a document declares, before anything is read from its buffers."""
+    graph.check_declared(len(doc.get("nodes", [])), "nodes", "glTF file")
+    graph.check_declared(len(doc.get("accessors", [])), "accessors", "glTF file")
+    graph.check_declared(sum(len(m.get("primitives", [])) for m in doc["meshes"]), "primitives", "glTF file")
 
 
 def _primitive(primitive: dict, accessors: list) -> graph.Totals:
