@@ -24,7 +24,7 @@ def main() -> None:
     args = parser.parse_args()
     near_limit = [
         ("3mf-6561-placements", "near.3mf", h.component_chain_3mf(9, 3)),
-        ("dae-6561-placements", "near.dae", h.instance_node_dae(9, 3)),
+        ("dae-1900-placements", "near.dae", h.instance_node_dae(2, 1900)),
         ("gltf-49k-nodes", "near.zip", h.many_nodes_zip(49_000)),
     ]
     cases = [(c, f, data) for c, f, data, _ in BOMBS] + near_limit
