@@ -11,7 +11,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.main import create_app
-from tests.conftest import make_settings, wait_for
+from tests.conftest import make_settings, wait_for, wait_job
 from tests.reliability.corpus import MAX_VERTICES
 from tests.reliability.helpers import MULTIPART_HEADERS, multipart, snapshot
 from tests.reliability.hostile import identical_tetrahedra, ribbon
@@ -65,3 +65,12 @@ def test_degenerate_geometry_is_answered_or_refused_with_words(served, case):
             assert len(r.json()["error"]["message"]) > 20, r.text
     r = client.post("/models", content=multipart(filename, content), headers=MULTIPART_HEADERS)
     assert r.status_code in (202, 422), r.text[:300]
+    if r.status_code == 202:  # stored: its ingestion ends, and what views it answers without a 5xx
+        job = wait_job(client, r.json()["job_id"], timeout_s=120)
+        model_id = r.json()["model_id"]
+        if job["state"] == "done":
+            for view in (f"/models/{model_id}/explain", f"/models/{model_id}/thumbnail.png"):
+                answer = client.get(view)
+                assert answer.status_code in (200, 422), (view, answer.status_code, answer.text[:300])
+        else:
+            assert len(job["error"] or "") > 20, job
