@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import errno
 import logging
+import sqlite3
 from collections.abc import Mapping
 
 from fastapi import FastAPI, Request
@@ -105,6 +106,15 @@ def install(app: FastAPI) -> None:
             )
         log.exception("unhandled OS error")
         return error_response(500, "internal_error", "internal error; see the server log")
+
+    @app.exception_handler(sqlite3.OperationalError)
+    async def _database(request: Request, exc: sqlite3.OperationalError) -> JSONResponse:
+        """SQLite's "database or disk is full" (SQLITE_FULL) is no OSError: the same 507 as ENOSPC."""
+        if "disk is full" in str(exc):
+            log.error("database storage error on %s %s: %s", request.method, request.url.path, exc)
+            return error_response(507, "insufficient_storage", "the server's disk is full; nothing was saved")
+        log.exception("unhandled database error on %s %s", request.method, request.url.path)
+        return error_response(500, "internal_error", "internal error; see the server log", SECURITY_HEADERS)
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:

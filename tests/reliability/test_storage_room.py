@@ -118,3 +118,17 @@ def test_a_full_disk_refuses_writes_with_507_and_keeps_reads_and_deletes(client,
 
     monkeypatch.setattr(space, "free_bytes", lambda path: 10_000 * MB)  # room again
     assert client.post("/models", content=body, headers=MULTIPART_HEADERS).status_code == 202
+
+
+def test_sqlite_saying_the_disk_is_full_is_a_507_not_a_500(client, monkeypatch):
+    import sqlite3
+
+    from app.services import catalog
+
+    def full(*args, **kwargs):
+        raise sqlite3.OperationalError("database or disk is full")
+
+    monkeypatch.setattr(catalog, "list_models", full)
+    r = client.get("/models")
+    assert r.status_code == 507 and r.json()["error"]["code"] == "insufficient_storage"
+    assert r.headers["x-content-type-options"] == "nosniff"
