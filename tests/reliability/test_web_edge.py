@@ -15,6 +15,8 @@ from app.api import limits
 from app.config import MIN_TOKEN_CHARS, is_loopback
 from app.main import create_app
 from app.services import catalog, metadata
+from tests.api.live import live_server
+from tests.api.test_web_browser import VIEWPORT, launch, needs_chromium
 from tests.conftest import make_settings
 from tests.reliability.corpus import valid_bytes
 from tests.reliability.helpers import MULTIPART_HEADERS, multipart, snapshot
@@ -169,3 +171,52 @@ def test_the_schema_lists_every_route_with_the_server_enums_and_limits(client):
     # the server enforces the enum the schema states
     r = client.get("/models?status=deleted")
     assert r.status_code == 422 and "queued" in r.json()["error"]["message"]
+
+
+def test_shapebag_serve_in_dev_mode_on_every_address_exits_with_one_line(tmp_path, capsys, monkeypatch):
+    from app.cli import main as cli_main
+
+    monkeypatch.delenv("SHAPEBAG_ADMIN_TOKEN", raising=False)
+    code = cli_main(
+        ["serve", "--dev", "--host", "0.0.0.0", "--data-dir", str(tmp_path / "d"), "--workers", "0"]
+    )
+    lines = [
+        ln for ln in capsys.readouterr().err.strip().splitlines() if not ln.startswith("data directory: ")
+    ]
+    assert code == 2 and len(lines) == 1 and "loopback" in lines[0], lines
+
+
+@needs_chromium
+def test_the_page_and_docs_run_under_their_policy_without_a_violation(tmp_path):
+    """Chromium reports every resource or script the policy blocks (securitypolicyviolation events and
+    console errors): the page and /docs with Swagger UI report none (the viewer test runs three.js under
+    the same policy)."""
+    from playwright.sync_api import sync_playwright
+
+    watch = (
+        "window.__csp = []; document.addEventListener('securitypolicyviolation',"
+        " e => window.__csp.push(e.violatedDirective + ' ' + e.blockedURI));"
+    )
+    with live_server(make_settings(tmp_path / "data", workers=0)) as base, sync_playwright() as p:
+        browser = launch(p)
+        page = browser.new_page(viewport=VIEWPORT)
+        page.add_init_script(watch)
+        console: list[str] = []
+        page.on("console", lambda m: console.append(m.text) if "Content Security Policy" in m.text else None)
+        page.goto(base + "/")
+        page.wait_for_selector("#status")
+        page.wait_for_load_state("networkidle")
+        on_page = page.evaluate("window.__csp")
+        page.goto(base + "/docs")
+        page.wait_for_selector(".swagger-ui .opblock", timeout=30_000)
+        on_docs = page.evaluate("window.__csp")
+        # the watch does see what the policy blocks: an inline script injected into the docs page
+        page.evaluate(
+            "() => document.body.append(Object.assign(document.createElement('script'), {text: '1'}))"
+        )
+        page.wait_for_timeout(300)
+        injected = page.evaluate("window.__csp")
+        browser.close()
+    assert on_page == [] and on_docs == [], (on_page, on_docs)
+    assert len(injected) == 1 and injected[0].startswith("script-src"), injected
+    assert len(console) == 1, console  # the injected script's report, nothing else
