@@ -6,8 +6,9 @@ nosniff, no framing (frame-ancestors 'none' and X-Frame-Options DENY), no referr
 
 A browser sends `Origin` with every POST, PUT, PATCH and DELETE; a page on another site that posts a form
 to this service (it needs no CORS preflight for a multipart form) carries that site's origin and gets
-403. Clients that send no Origin (curl, httpx, the CLI) and the service's own page pass; so do the
-origins named in SHAPEBAG_CORS_ORIGINS.
+403. Clients that send no Origin (curl, httpx, the CLI) and the service's own page pass (its host name,
+whatever the port: a proxy such as deploy/nginx forwards `Host` without it); so do the origins named in
+SHAPEBAG_CORS_ORIGINS.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ HEADERS = {
     "Cross-Origin-Opener-Policy": "same-origin",
 }
 STATE_CHANGING = frozenset({"POST", "PUT", "PATCH", "DELETE"})
-_DEFAULT_PORTS = {"http": 80, "https": 443}
+_SCHEMES = ("http", "https")
 _INLINE_SCRIPT = re.compile(r"<script>(.*?)</script>", re.S)
 
 
@@ -46,13 +47,12 @@ def csp_with_inline_scripts(html: str) -> str:
     return PAGE_CSP.replace("script-src 'self'", " ".join(["script-src 'self'", *hashes]))
 
 
-def _netloc(scheme: str, host: str) -> str:
-    """'Example.org:80' under http -> 'example.org' (the default port dropped, lower case)."""
-    host = host.strip().lower()
-    name, _, port = host.rpartition(":") if not host.endswith("]") else (host, "", "")
-    if name and port.isdigit() and int(port) == _DEFAULT_PORTS.get(scheme):
-        return name
-    return host
+def _hostname(netloc: str) -> str | None:
+    """'Example.org:8080' -> 'example.org', '[::1]:80' -> '::1'; None when it is no host at all."""
+    try:
+        return urlsplit("//" + netloc.strip()).hostname
+    except ValueError:
+        return None
 
 
 class SecureEdge:
@@ -93,8 +93,9 @@ class SecureEdge:
         if origin.rstrip("/").lower() in self.allowed:
             return True
         parts = urlsplit(origin)
-        if parts.scheme not in _DEFAULT_PORTS or not parts.netloc:
+        if parts.scheme not in _SCHEMES or not parts.netloc:
             return False  # 'null' (a sandboxed frame, a file: page) and anything odd
-        host = headers.get("host", "")
-        # behind a TLS proxy the request may arrive as http while the page was https: compare hosts
-        return _netloc(parts.scheme, parts.netloc) == _netloc(parts.scheme, host)
+        # host names only: behind a TLS proxy the page is https and the request http, and a proxy may
+        # forward Host without the port the page was served on
+        own = _hostname(headers.get("host", ""))
+        return own is not None and _hostname(parts.netloc) == own
