@@ -47,6 +47,19 @@ def csp_with_inline_scripts(html: str) -> str:
     return PAGE_CSP.replace("script-src 'self'", " ".join(["script-src 'self'", *hashes]))
 
 
+def document_refusals(schema: dict) -> dict:
+    """The OpenAPI schema with the 403 this middleware answers on every state-changing operation."""
+    refusal = {
+        "description": "Forbidden: sent by another site's page (a foreign Origin)",
+        "content": {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorResponse"}}},
+    }
+    for operations in schema.get("paths", {}).values():
+        for method, operation in operations.items():
+            if method.upper() in STATE_CHANGING:
+                operation.setdefault("responses", {}).setdefault("403", refusal)
+    return schema
+
+
 def _hostname(netloc: str) -> str | None:
     """'Example.org:8080' -> 'example.org', '[::1]:80' -> '::1'; None when it is no host at all."""
     try:

@@ -150,6 +150,11 @@ def test_the_schema_lists_every_route_with_the_server_enums_and_limits(client):
     preview = paths["/web/preview.png"]["post"]
     assert "image/png" in preview["responses"]["200"]["content"]
     assert preview["requestBody"]["content"]["multipart/form-data"]["schema"]["required"] == ["file"]
+    for method, path in (("post", "/models"), ("delete", "/models/{model_id}"), ("post", "/search")):
+        assert "403" in paths[path][method]["responses"], (method, path)
+    for path in ("/models", "/admin/vocabulary/rebuild", "/admin/index/rebuild"):
+        assert "507" in paths[path]["post"]["responses"], path
+    assert "403" not in paths["/models"]["get"]["responses"]
     status = next(p for p in paths["/models"]["get"]["parameters"] if p["name"] == "status")
     assert status["schema"]["anyOf"][0]["enum"] == list(catalog.STATUSES)
     form = paths["/models"]["post"]["requestBody"]["content"]["multipart/form-data"]["schema"]["properties"]

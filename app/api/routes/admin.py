@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, status
 
@@ -21,7 +21,13 @@ def _enqueue(ctx, kind: str, payload: dict) -> JobAccepted:
     return JobAccepted(job_id=job_id, status=state, state=state)
 
 
-@router.post("/vocabulary/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted)
+# the data directory at its floor or quota (app/api/space.py)
+FULL: dict[int | str, dict[str, Any]] = {507: {"model": ErrorResponse}}
+
+
+@router.post(
+    "/vocabulary/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted, responses=FULL
+)
 def rebuild_vocabulary(
     _: AdminDep, __: RoomDep, ctx: CtxDep, body: Annotated[VocabularyRebuild | None, Body()] = None
 ) -> JobAccepted:
@@ -32,7 +38,9 @@ def rebuild_vocabulary(
     return _enqueue(ctx, "rebuild_vocabulary", body.model_dump())
 
 
-@router.post("/index/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted)
+@router.post(
+    "/index/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted, responses=FULL
+)
 def rebuild_index(_: AdminDep, __: RoomDep, ctx: CtxDep) -> JobAccepted:
     """Re-encode every model with the active vocabulary from its cached description (a job)."""
     return _enqueue(ctx, "rebuild_index", {})
