@@ -107,6 +107,16 @@ def install(app: FastAPI) -> None:
         log.exception("unhandled OS error")
         return error_response(500, "internal_error", "internal error; see the server log")
 
+    try:  # the PostgreSQL backend (an optional extra): its "disk full", SQLSTATE 53100
+        from psycopg.errors import DiskFull
+
+        @app.exception_handler(DiskFull)
+        async def _postgres_full(request: Request, exc: Exception) -> JSONResponse:
+            log.error("database storage error on %s %s: %s", request.method, request.url.path, exc)
+            return error_response(507, "insufficient_storage", "the server's disk is full; nothing was saved")
+    except ImportError:
+        pass
+
     @app.exception_handler(sqlite3.OperationalError)
     async def _database(request: Request, exc: sqlite3.OperationalError) -> JSONResponse:
         """SQLite's "database or disk is full" (SQLITE_FULL) is no OSError: the same 507 as ENOSPC."""

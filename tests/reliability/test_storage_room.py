@@ -132,3 +132,17 @@ def test_sqlite_saying_the_disk_is_full_is_a_507_not_a_500(client, monkeypatch):
     r = client.get("/models")
     assert r.status_code == 507 and r.json()["error"]["code"] == "insufficient_storage"
     assert r.headers["x-content-type-options"] == "nosniff"
+
+
+def test_postgres_disk_full_is_a_507_too(client, monkeypatch):
+    errors = pytest.importorskip("psycopg.errors")
+    from app.services import catalog
+
+    DiskFull = errors.DiskFull  # SQLSTATE 53100
+
+    def full(*args, **kwargs):
+        raise DiskFull("could not extend file: No space left on device")
+
+    monkeypatch.setattr(catalog, "list_models", full)
+    r = client.get("/models")
+    assert r.status_code == 507 and r.json()["error"]["code"] == "insufficient_storage"
