@@ -44,7 +44,9 @@ HOOKS = Path(__file__).resolve().parent / "hooks"
 
 def hold(target: str, barrier: Path) -> dict[str, str]:
     """Environment that holds `module:function` at `barrier` in a real process (hooks/sitecustomize.py)."""
-    return {"PYTHONPATH": str(HOOKS), "SHAPEBAG_TEST_HOLD": target, "SHAPEBAG_TEST_HOLD_FILE": str(barrier)}
+    # the caller's PYTHONPATH kept: a checkout run with PYTHONPATH=. must serve its own app/
+    path = os.pathsep.join(p for p in (str(HOOKS), os.environ.get("PYTHONPATH", "")) if p)
+    return {"PYTHONPATH": path, "SHAPEBAG_TEST_HOLD": target, "SHAPEBAG_TEST_HOLD_FILE": str(barrier)}
 
 
 def consistent(data_dir: Path) -> dict:
