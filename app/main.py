@@ -16,6 +16,7 @@ from app.api import errors
 from app.api.deps import Runtime
 from app.api.limits import GuardUploads, RefuseEncodedBodies, check_data_dir
 from app.api.routes import admin, docs, explain, health, jobs, labels, models, search, web
+from app.api.security import SecureEdge, document_refusals
 from app.config import Settings
 from app.services import vocabularies
 from app.services.context import ServiceContext, open_context
@@ -86,6 +87,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     if settings.cors_origins:  # closed unless configured
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "POST"])
+    # outside the others: its headers go on their refusals too, and a foreign Origin is refused first
+    app.add_middleware(SecureEdge, allowed_origins=settings.cors_origins)
 
     @app.middleware("http")
     async def observe_latency(request: Request, call_next):
@@ -100,6 +103,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     for module in (models, labels, jobs, search, admin, health, web, docs, explain):
         app.include_router(module.router)
+    generate = app.openapi
+
+    def openapi() -> dict:
+        if app.openapi_schema is None:
+            app.openapi_schema = document_refusals(generate())
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
     return app
 
 

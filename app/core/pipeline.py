@@ -18,13 +18,14 @@ from app.core.holes import fill_holes
 from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import LAPLACIANS, laplacian
 from app.core.mesh import InvalidMeshError, Mesh
+from app.core.packing import pack_float32, unpack_float32
 from app.core.remeshing import isotropic_remesh
 from app.core.resolution import SUBDIVISIONS, normalize_scale, to_resolution
 from app.core.roughness import smooth_until
 from app.core.smoothing import WEIGHTS, taubin
 from app.core.spectrum import SpectrumError, smallest_eigenpairs
 
-DESCRIPTION_FORMAT = 1
+DESCRIPTION_FORMAT = 2  # 2: the HKS table packed (app/core/packing.py); 1 still loads
 
 
 @dataclass(frozen=True)
@@ -125,21 +126,28 @@ class ShapeDescription:
         return int(self.hks.shape[0])
 
     def save(self, path: str | Path) -> None:
-        """Write a .npz (no pickle)."""
+        """Write a .npz (no pickle); the HKS table packed losslessly (app/core/packing.py)."""
         with open(path, "wb") as fh:
             np.savez_compressed(
-                fh, hks=self.hks, weights=self.weights, keypoints=self.keypoints,
+                fh, hks_packed=pack_float32(self.hks), hks_shape=np.asarray(self.hks.shape, dtype=np.int64),
+                weights=self.weights, keypoints=self.keypoints,
                 eigenvalues=self.eigenvalues, input_vertices=np.int64(self.input_vertices),
                 format=np.int64(DESCRIPTION_FORMAT),
             )
 
     @classmethod
     def load(cls, path: str | Path) -> ShapeDescription:
+        """Read what save() writes, or a format-1 file (its HKS table stored as it is)."""
         with np.load(path, allow_pickle=False) as z:
-            if int(z["format"]) != DESCRIPTION_FORMAT:
-                raise ValueError(f"description format {int(z['format'])} is not {DESCRIPTION_FORMAT}")
+            found = int(z["format"])
+            if found not in (1, DESCRIPTION_FORMAT):
+                raise ValueError(f"description format {found} is not {DESCRIPTION_FORMAT}")
+            if found == 1:
+                hks = z["hks"]
+            else:
+                hks = unpack_float32(z["hks_packed"], tuple(int(x) for x in z["hks_shape"]))
             return cls(
-                hks=z["hks"], weights=z["weights"], keypoints=z["keypoints"].astype(bool),
+                hks=hks, weights=z["weights"], keypoints=z["keypoints"].astype(bool),
                 eigenvalues=z["eigenvalues"], input_vertices=int(z["input_vertices"]),
             )
 

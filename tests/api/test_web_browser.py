@@ -29,6 +29,16 @@ CHROMIUM_ARGS = [  # no GPU, no sandbox as root, and no background calls to a ne
 VIEWPORT = {"width": 1280, "height": 900}
 
 
+def wait_until(page, expression: str, timeout: int = 30_000) -> None:  # type: ignore[no-untyped-def]
+    """page.wait_for_function without its in-page eval, which the page's CSP (no 'unsafe-eval') refuses:
+    poll page.evaluate, which runs over the DevTools protocol, outside the page's policy."""
+    deadline = time.monotonic() + timeout / 1000
+    while not page.evaluate(expression):
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{expression[:80]!r} not true within {timeout / 1000:g} s")
+        page.wait_for_timeout(100)
+
+
 def launch(playwright):  # type: ignore[no-untyped-def]
     return playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
 
@@ -45,7 +55,7 @@ def capture_results(base_url: str, query: Path, screenshot: Path | None = None, 
         page.set_input_files("#file", str(query))
         page.wait_for_selector("#search-results .card.hit", timeout=90_000)
         try:
-            page.wait_for_function(  # every thumbnail (and the query preview) decoded
+            wait_until(page,   # every thumbnail (and the query preview) decoded
                 "[...document.querySelectorAll('#search-results img')]"
                 ".every(i => i.complete && i.naturalWidth > 0)",
                 timeout=60_000,
@@ -171,7 +181,7 @@ def test_browse_filter_similar_and_error_message(served: str, corpus) -> None:
         page.fill("#label-filter", labels[0])
         per_label = len(corpus.seeded) // len(labels)
         try:
-            page.wait_for_function(f"$('page-info').textContent.endsWith(' of {per_label}')")
+            wait_until(page, f"$('page-info').textContent.endsWith(' of {per_label}')")
         except Exception as exc:
             shows = page.text_content("#page-info"), page.text_content("#error-text")
             raise AssertionError(f"filter {labels[0]!r}: the page shows {shows!r}") from exc

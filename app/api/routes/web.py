@@ -16,7 +16,8 @@ from fastapi.responses import FileResponse, HTMLResponse
 
 from app.api.deps import RuntimeDep
 from app.api.limits import upload_format
-from app.api.uploads import read_form
+from app.api.schemas import ErrorResponse
+from app.api.uploads import multipart_body, read_form
 from app.core.mesh import SUPPORTED_FORMATS
 from app.services.errors import NotFoundError
 from app.services.rendering import render_upload
@@ -53,7 +54,20 @@ def static(name: str) -> FileResponse:
     return FileResponse(path, media_type=media, headers={"Cache-Control": "no-cache"})
 
 
-@router.post("/web/preview.png", response_class=Response, include_in_schema=False)
+PREVIEW_ERRORS = {c: {"model": ErrorResponse} for c in (403, 413, 415, 422, 503, 504)}
+PREVIEW = {
+    **multipart_body("the mesh to render"),
+    "responses": {"200": {"description": "the rendered mesh", "content": {"image/png": {}}}},
+}
+
+
+@router.post(
+    "/web/preview.png",
+    response_class=Response,
+    responses=PREVIEW_ERRORS,  # type: ignore[arg-type]
+    openapi_extra=PREVIEW,
+    summary="Render an uploaded mesh as a PNG (the web page's query thumbnail; nothing is stored)",
+)
 async def preview(request: Request, runtime: RuntimeDep) -> Response:
     """Render the uploaded mesh (multipart `file`) as the page's query thumbnail; nothing is stored.
 
