@@ -32,7 +32,6 @@ class DescribeSettings(BaseModel):
     smoothing: int = Field(default=DescribeParams.smoothing, ge=0)
     smoothing_weights: str = DescribeParams.smoothing_weights  # one of app.core.smoothing.WEIGHTS
     smoothing_target: float = Field(default=DescribeParams.smoothing_target, ge=0.0, allow_inf_nan=False)
-    smoothing_max: int = Field(default=DescribeParams.smoothing_max, ge=0)
     time_range: Literal["spectrum", "weyl"] = DescribeParams.time_range  # type: ignore[assignment]
     laplacian: Literal["cotangent", "intrinsic"] = DescribeParams.laplacian  # type: ignore[assignment]
     remesh: bool = DescribeParams.remesh

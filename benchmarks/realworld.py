@@ -284,9 +284,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--smoothing", type=int, default=None, help="Taubin steps (default: the shipped count)")
     ap.add_argument("--smoothing-weights", default=None,
                     help="Taubin weights, one of app.core.smoothing.WEIGHTS (default: the shipped ones)")
+    ap.add_argument("--smoothing-target", type=float, default=None,
+                    help="adaptive smoothing's roughness target (default: the shipped one; 0: fixed steps)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    overrides = {key: value for key in ("target_vertices", "k", "smoothing", "smoothing_weights")
+    overrides = {key: value for key in ("target_vertices", "k", "smoothing", "smoothing_weights", "smoothing_target")
                  if (value := getattr(args, key)) is not None}
     if args.child:
         print(json.dumps(describe_upload(args.child, args.baseline, overrides)))

@@ -66,11 +66,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="Taubin steps before the eigen-solve, λ and μ alternating (0: none; "
                    "default %(default)s)")
     p.add_argument("--smoothing-target", type=float, default=EvaluationOptions.smoothing_target,
-                   metavar="R", help="adaptive smoothing: Taubin pairs until the roughness is at most R, "
-                   "--smoothing-max steps at most, after --smoothing steps for a subdivided mesh "
-                   "(0: exactly --smoothing steps for every mesh)")
-    p.add_argument("--smoothing-max", type=int, default=EvaluationOptions.smoothing_max, metavar="N",
-                   help="adaptive smoothing's most Taubin steps")
+                   metavar="R", help="adaptive smoothing: a mesh that was not subdivided gets Taubin pairs "
+                   "until its roughness is at most R, --smoothing steps at most (0: --smoothing steps for "
+                   "every mesh)")
     p.add_argument("--smoothing-weights", choices=WEIGHTS, default=EvaluationOptions.smoothing_weights,
                    help="Taubin weights: intrinsic (intrinsic Delaunay cotangent), cotangent (extrinsic, "
                    "clipped at 0), area (faces on each edge), capped-area (the same, each face at most the "
@@ -141,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
         time_range=args.time_range,
         smoothing=args.smoothing,
         smoothing_weights=args.smoothing_weights, smoothing_target=args.smoothing_target,
-        smoothing_max=args.smoothing_max,
+
         fill_holes=args.fill_holes,
         laplacian=args.laplacian,
         remesh=args.remesh,

@@ -50,10 +50,11 @@ class DescribeParams:
     # collection measured: cotangent weights do not even out a triangulation, uncapped areas lose on
     # rigid parts, uniform weights depend on the connectivity (docs/results.md)
     smoothing_weights: str = "capped-area"
-    # > 0: smoothing is adaptive: Taubin pairs until the canonical mesh's roughness (app.core.roughness)
-    # is at most this, `smoothing` steps at most; 0: exactly `smoothing` steps
+    # > 0: adaptive smoothing. A mesh that reaches the canonical resolution by decimation (a scan, a
+    # fine model) keeps its detail unless it is noisy: Taubin pairs only until its roughness
+    # (app.core.roughness) is at most this, `smoothing` steps at most. A subdivided mesh always gets
+    # `smoothing` steps: its flat facets are the pipeline's own. 0: `smoothing` steps for every mesh
     smoothing_target: float = 0.0
-    smoothing_max: int = 40  # adaptive smoothing's most steps
     # intrinsic (cotangent weights of the intrinsic Delaunay triangulation: the same operator on a
     # Delaunay mesh, far less dependent on the triangulation elsewhere) | cotangent (the paper's)
     laplacian: str = "intrinsic"
@@ -91,7 +92,7 @@ class DescribeParams:
         d = asdict(self)
         f = d.pop("keypoint_filter")
         if not d["smoothing_target"]:  # fixed smoothing names its descriptions as before the option
-            del d["smoothing_target"], d["smoothing_max"]
+            del d["smoothing_target"]
         parts = [f"{k}={v}" for k, v in sorted(d.items()) if k != "solver"]
         parts += [f"kf.{k}={v}" for k, v in sorted(f.items())]
         return ";".join(parts)
@@ -212,15 +213,10 @@ def _from_canonical(fine: Mesh, input_vertices: int, params: DescribeParams,
 
 
 def smooth(fine: Mesh, input_vertices: int, params: DescribeParams) -> Mesh:
-    """The canonical mesh as the eigen-solve sees it: Taubin smoothing, fixed or adaptive.
-
-    Adaptive: a mesh that was subdivided to reach the canonical resolution gets `smoothing` steps
-    first (the flat facets are the pipeline's own: every such mesh has them), then every mesh gets
-    Taubin pairs until its measured roughness is at most `smoothing_target`."""
-    if params.smoothing_target > 0:
-        floor = params.smoothing if fine.n_vertices > input_vertices else 0
-        return smooth_until(fine, params.smoothing_target, params.smoothing_max, params.smoothing_weights,
-                            min_steps=floor)[0]
+    """The canonical mesh as the eigen-solve sees it: `smoothing` Taubin steps, or, when adaptive
+    (smoothing_target > 0) and the mesh was not subdivided, only as many as its roughness needs."""
+    if params.smoothing_target > 0 and fine.n_vertices <= input_vertices:
+        return smooth_until(fine, params.smoothing_target, params.smoothing, params.smoothing_weights)[0]
     return taubin(fine, params.smoothing, params.smoothing_weights)
 
 

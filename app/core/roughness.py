@@ -57,16 +57,14 @@ def roughness(mesh: Mesh, averaging: tuple[sp.csr_matrix, np.ndarray] | None = N
     return float(np.median(rough) / edge)
 
 
-def smooth_until(mesh: Mesh, target: float, max_steps: int, weights: str = "capped-area",
-                 min_steps: int = 0) -> tuple[Mesh, int]:
-    """Taubin λ|μ pairs (app.core.smoothing.taubin's steps, W from the input): at least min_steps, then
-    until roughness <= target or max_steps steps are done: each mesh smoothed only as much as its own
-    noise needs. vertices (n, 3) move, faces (f, 3) are kept. Returns the mesh and the steps taken."""
+def smooth_until(mesh: Mesh, target: float, max_steps: int, weights: str = "capped-area") -> tuple[Mesh, int]:
+    """Taubin λ|μ pairs (app.core.smoothing.taubin's steps, W from the input) until roughness <= target
+    or max_steps steps are done: each mesh smoothed only as much as its own noise needs.
+    vertices (n, 3) move, faces (f, 3) are kept. Returns the mesh and the steps taken (even)."""
     w, has = averaging_operator(mesh, weights)
     x = mesh.vertices.copy()
     steps = 0
-    while steps + 2 <= max(max_steps, min_steps) and (
-            steps < min_steps or roughness(Mesh(x, mesh.faces), (w, has)) > target):
+    while steps + 2 <= max_steps and roughness(Mesh(x, mesh.faces), (w, has)) > target:
         for s in (LAMBDA, MU):
             x = x + s * np.where(has[:, None], w @ x - x, 0.0)  # (n, 3)
         steps += 2

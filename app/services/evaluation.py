@@ -58,7 +58,6 @@ class EvaluationOptions:
     smoothing: int = DescribeParams.smoothing  # Taubin steps (λ, μ, λ ...)
     smoothing_weights: str = DescribeParams.smoothing_weights  # one of smoothing.WEIGHTS
     smoothing_target: float = DescribeParams.smoothing_target  # > 0: adaptive, to this roughness
-    smoothing_max: int = DescribeParams.smoothing_max  # adaptive smoothing's most steps
     fill_holes: float = DescribeParams.fill_holes  # largest cap closed, fraction of the area
     laplacian: str = DescribeParams.laplacian  # cotangent | intrinsic (intrinsic Delaunay)
     remesh: bool = DescribeParams.remesh  # isotropic remeshing at the canonical resolution
@@ -109,7 +108,6 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
         base = DescribeParams(
             k=options.k, target_vertices=options.target_vertices, time_range=options.time_range,
             smoothing=options.smoothing, smoothing_target=options.smoothing_target,
-            smoothing_max=options.smoothing_max,
             smoothing_weights=options.smoothing_weights, laplacian=options.laplacian, remesh=options.remesh,
             subdivision=options.subdivision, fill_holes=options.fill_holes, keypoint_filter=flt,
         )

@@ -75,21 +75,26 @@ def test_smooth_until_stops_on_a_clean_mesh_and_smooths_a_noisy_one_to_its_targe
     np.testing.assert_allclose(smoothed.vertices, taubin(noisy, steps, "capped-area").vertices, atol=1e-12)
 
 
-def test_smooth_until_honours_its_floor_and_its_ceiling():
+def test_smooth_until_honours_its_ceiling():
     noisy = _noisy(_sphere(3), 0.5)
     assert smooth_until(noisy, target=1e-9, max_steps=6)[1] == 6
-    assert smooth_until(_sphere(3), target=1.0, max_steps=40, min_steps=12)[1] == 12
+    assert smooth_until(noisy, target=1e-9, max_steps=7)[1] == 6  # whole λ|μ pairs only
 
 
-def test_adaptive_smoothing_gives_subdivided_meshes_the_fixed_steps_first():
+def test_adaptive_smoothing_smooths_a_subdivided_mesh_fully_and_a_fine_one_by_its_noise():
     coarse = _sphere(1)  # 42 vertices: subdivided to reach the canonical resolution
-    params = DescribeParams(target_vertices=600, smoothing=12, smoothing_target=10.0)
-    fine = Mesh(*trimesh.remesh.subdivide(coarse.vertices, coarse.faces, ))
-    fine = Mesh(np.asarray(fine.vertices, np.float64), np.asarray(fine.faces, np.int64))
+    params = DescribeParams(smoothing=12, smoothing_target=10.0)  # a target every mesh here meets
+    fine = _sphere(3)  # what subdividing it gives (642 vertices), as the describe's input or as its own
     np.testing.assert_allclose(smooth(fine, coarse.n_vertices, params).vertices,
                                taubin(fine, 12, "capped-area").vertices, atol=1e-12)
-    # the same canonical mesh given at its own resolution: nothing of ours to smooth, and it is smooth
+    # the same mesh given at its own resolution: nothing of ours to smooth, and it is smooth
     assert smooth(fine, fine.n_vertices, params) is fine
+    noisy = _noisy(fine, 0.3)
+    strict = DescribeParams(smoothing=12, smoothing_target=0.02)
+    steps = smooth_until(noisy, 0.02, 12)[1]
+    assert 0 < steps <= 12
+    np.testing.assert_allclose(smooth(noisy, noisy.n_vertices, strict).vertices,
+                               taubin(noisy, steps, "capped-area").vertices, atol=1e-12)
 
 
 def test_fixed_smoothing_keeps_the_fingerprint_it_had_before_the_adaptive_option():
