@@ -15,8 +15,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("vocabulary", help="fit, rebuild or show geometric vocabularies")
     sub = p.add_subparsers(dest="action", required=True)
 
-    fit = sub.add_parser("fit", help="fit a vocabulary on a labelled folder and save it (no data dir needed)")
-    fit.add_argument("directory", type=Path, help="folder holding labels.csv and the meshes")
+    fit = sub.add_parser("fit", help="fit a vocabulary on folders of meshes and save it (no data dir needed)")
+    fit.add_argument("directory", type=Path, nargs="+",
+                     help="folders of meshes (labels are not needed: a labels.csv, if any, lists the files)")
     fit.add_argument(
         "--out", type=Path, required=True, help="new directory for centers.npy + vocabulary.json"
     )
@@ -52,7 +53,7 @@ def run_fit(args: argparse.Namespace) -> int:
 
     from app.core.fusion import DEFAULT_WEIGHT
     from app.core.vocabulary import Vocabulary
-    from app.datasets.folder import DatasetError, read_labelled_folder
+    from app.datasets.folder import DatasetError, read_mesh_folder
     from app.progress import progress
     from app.services.query_pool import describe_bytes
     from app.worker.processes import pin_threads
@@ -61,7 +62,7 @@ def run_fit(args: argparse.Namespace) -> int:
         raise CommandError(f"{args.out} exists: vocabularies are immutable, choose a new directory")
     settings = settings_from(args)
     try:
-        items = read_labelled_folder(args.directory)
+        items = [item for directory in args.directory for item in read_mesh_folder(directory)]
     except DatasetError as exc:
         raise CommandError(str(exc)) from exc
     params = settings.describe.params()
@@ -77,15 +78,16 @@ def run_fit(args: argparse.Namespace) -> int:
         ):
             try:
                 descriptions.append(fut.result()[0])
-            except ValueError as exc:  # InvalidMeshError: skip the mesh, say so
+            except ValueError as exc:  # InvalidMeshError, UnsupportedFormatError: skip the mesh, say so
                 print(f"  skipped {item.path}: {exc}")
     if not descriptions:
         raise CommandError("no mesh could be described")
     meta = {
-        "source": Path(args.directory).name,
+        "source": " + ".join(Path(d).name for d in args.directory),
         "meshes": len(descriptions),
         "describe": params.fingerprint(),
-        "command": f"shapebag vocabulary fit {args.directory} --size {args.size} --run {args.run} "
+        "command": f"shapebag vocabulary fit {' '.join(map(str, args.directory))} --size {args.size} "
+        f"--run {args.run} "
         f"--seed {args.seed}",
     }
     weight = DEFAULT_WEIGHT if args.fusion_weight is None else args.fusion_weight

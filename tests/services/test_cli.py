@@ -44,6 +44,23 @@ def test_vocabulary_fit_writes_a_loadable_vocabulary(folder, tmp_path, capsys):
     assert main(["vocabulary", "fit", str(folder), "--out", str(out)]) == 2  # immutable: refused
 
 
+def test_vocabulary_fit_takes_several_folders_labelled_or_not(folder, tmp_path, capsys):
+    loose = tmp_path / "loose"  # no labels.csv, a file it cannot read, one it does not know
+    loose.mkdir()
+    for i, path in enumerate(sorted(folder.rglob("*.*"))[:3]):
+        if path.name != "labels.csv":
+            shutil.copy(path, loose / f"loose{i}{path.suffix}")
+    (loose / "broken.obj").write_text("v 0 0 0\n")
+    (loose / "notes.txt").write_text("not a mesh")
+    out = tmp_path / "vocab"
+    assert main(["vocabulary", "fit", str(folder), str(loose), "--out", str(out), "--size", "8",
+                 "--processes", "1"]) == 0
+    assert "skipped" in capsys.readouterr().out and "broken.obj" not in str(Vocabulary.load(out).metadata)
+    meta = json.loads((out / "vocabulary.json").read_text())
+    loose_meshes = len([p for p in loose.iterdir() if p.name.startswith("loose")])
+    assert meta["meshes"] == 6 + loose_meshes and meta["source"] == "folder + loose"
+
+
 def test_ingest_is_resumable_then_search_ranks_and_show_lists(folder, tmp_path, capsys, monkeypatch):
     data = tmp_path / "data"
     monkeypatch.setenv("SHAPEBAG_VOCABULARY_SIZE", "8")
