@@ -26,10 +26,11 @@ import httpx
 import numpy as np
 
 from app.core import metrics
+from app.datasets import locate
 from benchmarks.common import table, write_json
 from benchmarks.service import free_port, start_server, stop_server
 
-DEFAULT_DIR = Path("../shared/datasets/shrec11-simplified")
+DEFAULT_DIR = locate.dataset_dir("shrec11-simplified")  # SHAPEBAG_DATASETS/shrec11-simplified
 MAX_K = 100
 
 

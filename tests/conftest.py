@@ -4,7 +4,6 @@ a seeded data directory (models ingested, a small vocabulary fitted) that tests 
 from __future__ import annotations
 
 import csv
-import os
 import shutil
 import time
 from dataclasses import dataclass
@@ -13,16 +12,27 @@ from pathlib import Path
 import pytest
 
 from app.config import DescribeSettings, Settings
+from app.datasets import locate
 
-SHREC = Path(
-    os.environ.get(
-        "SHAPEBAG_SHREC", Path(__file__).resolve().parents[2] / "shared" / "datasets" / "shrec11-simplified"
-    )
-)
+SHREC = locate.dataset_dir("shrec11-simplified")  # SHAPEBAG_DATASETS (app/datasets/locate.py)
 CLASSES = 4
 PER_CLASS = 4  # 3 seeded + 1 held out for uploads
 TEST_WORDS = 16
 TEST_VERTICES = 300  # SHREC meshes (~250 vertices) stay as they are; finer ones are simplified to ~300
+
+
+def dataset_or_skip(name: str) -> Path:
+    """The folder of dataset `name`, or skip the test with a message naming it and how to get it."""
+    reason = locate.missing_reason(name)
+    if reason is not None:
+        pytest.skip(reason)
+    return locate.dataset_dir(name)
+
+
+def needs_dataset(name: str) -> pytest.MarkDecorator:
+    """Mark: skip unless dataset `name` is present (the reason says how to get it)."""
+    reason = locate.missing_reason(name)
+    return pytest.mark.skipif(reason is not None, reason=reason or "")
 
 
 @dataclass(frozen=True)
@@ -51,7 +61,7 @@ def _pick(root: Path) -> list[tuple[Path, str]]:
 @pytest.fixture(scope="session")
 def corpus(tmp_path_factory) -> Corpus:
     """A few SHREC'11 meshes (~250 vertices) when the dataset is present, else a synthetic corpus."""
-    if (SHREC / "labels.csv").is_file():
+    if locate.missing_reason("shrec11-simplified") is None:
         return Corpus(SHREC, _pick(SHREC))
     from app.datasets.synthetic import generate
 
