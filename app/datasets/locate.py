@@ -15,19 +15,10 @@ ENV = "SHAPEBAG_DATASETS"
 # app/datasets/locate.py -> the repository root (a source checkout; an installed wheel has no ../shared)
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
-# name -> (the file that proves the copy is complete, how to get it)
+# name -> (the file that proves the copy is complete, what it is; data/README.md says how to get it)
 KNOWN: dict[str, tuple[str, str]] = {
-    "shrec11-simplified": (
-        "labels.csv",
-        "the SHREC 2011 non-rigid collection as simplified by MeshCNN (shrec_16: 600 meshes, 30 classes, "
-        "~250 vertices, laid out CLASS/train|test/T<id>.obj; MeshCNN's scripts/shrec/get_data.sh downloads "
-        "it) with a labels.csv of `file,class` rows",
-    ),
-    "realworld": (
-        "SOURCES.csv",
-        "133 third-party mesh files of permissive licences with a SOURCES.csv (file, repo, path, licence); "
-        "any folder of mesh files with that CSV works",
-    ),
+    "shrec11-simplified": ("labels.csv", "SHREC'11 non-rigid as simplified by MeshCNN, with labels.csv"),
+    "realworld": ("SOURCES.csv", "third-party mesh files with SOURCES.csv"),
 }
 
 
@@ -52,10 +43,7 @@ def missing_reason(name: str) -> str | None:
     path = dataset_dir(name)
     if path.is_dir() and (not marker or (path / marker).is_file()):
         return None
-    return (
-        f"dataset {name!r} not found at {path}: set {ENV} to a folder holding {name}/ ({how}); "
-        f"the datasets are never part of the repository"
-    )
+    return f"dataset {name} ({how}) not found at {path}: set {ENV} to its parent folder (data/README.md)"
 
 
 def require(name: str) -> Path:
