@@ -43,6 +43,7 @@ def test_vocabulary_fit_writes_a_loadable_vocabulary(folder, tmp_path, capsys):
     assert main(["vocabulary", "fit", str(folder), "--out", str(out)]) == 2  # immutable: refused
 
 
+@pytest.mark.slow  # the CLI's describing processes, twice, then a vocabulary fit
 def test_ingest_is_resumable_then_search_ranks_and_show_lists(folder, tmp_path, capsys, monkeypatch):
     data = tmp_path / "data"
     monkeypatch.setenv("SHAPEBAG_VOCABULARY_SIZE", "8")
