@@ -26,7 +26,7 @@ def dataset_dir() -> Path:
 
 def labelled_files(root: Path | None = None) -> list[tuple[Path, str]]:
     """[(path, class)] from labels.csv, in file order."""
-    root = root or dataset_dir()
+    root = root or locate.require("shrec11-simplified")  # DatasetMissing: names it and how to get it
     with open(root / "labels.csv", newline="") as fh:
         return [(root / row["file"], row["class"]) for row in csv.DictReader(fh)]
 
