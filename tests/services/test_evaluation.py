@@ -196,6 +196,7 @@ def test_bad_folders_give_clear_errors(folder: Path, tmp_path: Path) -> None:
             evaluate(folder, _options(tmp_path / "c", rows=("run5",), sigma_scale=sigma))
 
 
+@pytest.mark.slow  # the evaluation command end to end on the SHREC'11 subset
 def test_command_prints_the_table_and_writes_json(
     folder: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
