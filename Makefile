@@ -13,8 +13,10 @@ DATASET ?= $(SHAPEBAG_DATASETS)/shrec11-simplified
 # the exact versions installed (pyproject.toml keeps the ranges; `make lock` rewrites these)
 LOCK    := requirements/dev.lock
 LOCKS   := requirements/base.lock requirements/postgres.lock $(LOCK)
-# make test's parallel pytest processes (pytest-xdist): auto = one per core
+# make test's parallel pytest processes (pytest-xdist): auto = one per core; a module's tests stay on one
+# process, so its module-scoped servers and data dirs are built once
 TEST_WORKERS ?= auto
+XDIST   := -n $(TEST_WORKERS) --dist loadscope
 DOCKER_UP ?= ../shared/containers/docker-up.sh
 SHIPPED_VOCAB   := app/data/vocabulary/default
 VOCAB_CLASSES   ?= 8
@@ -56,10 +58,10 @@ serve: install  ## serve your data directory $(DATA)/ (SHAPEBAG_DATA_DIR; empty 
 	$(BIN)/shapebag serve --data-dir $(DATA) --port $(PORT) $$([ -z "$$SHAPEBAG_ADMIN_TOKEN" ] && echo --dev)
 
 test: install  ## the quick suite, in parallel (a few minutes on 2 cores); tests needing a dataset skip, saying which
-	$(BIN)/pytest -q -n $(TEST_WORKERS) -m "not slow and not docker"
+	$(BIN)/pytest -q $(XDIST) -m "not slow and not docker"
 
 test-all: install chromium  ## everything, what CI runs: + dataset-wide, live servers, browsers, Docker (~15 min on 2 cores)
-	$(BIN)/pytest -q -n $(TEST_WORKERS) -m "not slow and not docker"
+	$(BIN)/pytest -q $(XDIST) -m "not slow and not docker"
 	$(BIN)/pytest -q -m "slow or docker"
 
 chromium:  ## Debian's chromium for the browser tests (installed as root; otherwise says they will skip)

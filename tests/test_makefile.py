@@ -62,7 +62,8 @@ def test_the_first_install_says_what_it_is_doing() -> None:
 
 def test_make_test_is_the_quick_tier_in_parallel_and_test_all_the_rest_after_chromium() -> None:
     quick = make("-n", "test")
-    assert "-n auto" in quick and '-m "not slow and not docker"' in quick and "chromium" not in quick
+    assert "-n auto --dist loadscope" in quick and '-m "not slow and not docker"' in quick
+    assert "chromium" not in quick
     everything = make("-n", "test-all")
     assert everything.index(".ci/chromium.sh") < everything.index("pytest")
     assert '-m "not slow and not docker"' in everything and '-m "slow or docker"' in everything

@@ -4,11 +4,11 @@ parameters, on as many descriptors, and serving the recipe's shapes as well as a
 What it does not check is the last bit. Describing is not continuous in the last bit of a coordinate
 (a discrete step before the spectrum, such as the canonical-resolution remeshing, can go another way):
 scaling the recipe's 96 meshes' coordinates by 1 ± 4e-16 (about two ulps) moved the pooled keypoints from
-4,285 to 4,270 and the Shape-DNA scale by 7e-4 relative, and another machine counted 4,289. So the counts and the scale are checked
-to a tolerance a few times that noise, and the words by what they serve: the mean average precision of the
-96 shapes retrieving each other, shipped words against the refit's, within the k-means seed spread (five
-seeds and three perturbations of the descriptions: 0.9957-0.9980 pure, 0.9881-0.9909 fused, against the
-shipped 0.9975 and 0.9908).
+4,285 to 4,270 and the Shape-DNA scale by 7e-4 relative, and another machine counted 4,289. So the counts
+and the scale are checked to a tolerance a few times that noise, and the words by what they serve: the
+mean average precision of the 96 shapes retrieving each other, shipped words against the refit's, within
+the k-means seed spread (five seeds and three perturbations of the descriptions: 0.9957-0.9980 pure,
+0.9881-0.9909 fused, against the shipped 0.9975 and 0.9908).
 """
 
 from __future__ import annotations
