@@ -5,14 +5,14 @@
 # The base's pip settings (PIP_CERT, SSL_CERT_FILE: a proxy CA) are inherited by every stage, untouched.
 #
 # Layers of the final image, slowest-changing first: base, user, the dependencies' venv (~370 MB, rebuilt only
-# when pyproject.toml changes), then the shapebag package itself (< 1 MB: all a code change rebuilds, ships
+# when the lock changes), then the shapebag package itself (< 1 MB: all a code change rebuilds, ships
 # and pulls).
 ARG BASE_IMAGE=python:3.12-slim
-# optional extras of pyproject.toml to install, comma-separated: `postgres` (psycopg + psycopg_pool) for
-# SHAPEBAG_DATABASE_URL=postgresql://... (docker-compose.scale.yml builds with it)
+# the optional extra of pyproject.toml to install: `postgres` (psycopg + psycopg_pool) for
+# SHAPEBAG_DATABASE_URL=postgresql://... (docker-compose.scale.yml builds with it); empty: none
 ARG EXTRAS=""
 
-# ---- deps: a virtual environment with the dependencies only, keyed on pyproject.toml (and EXTRAS) ----
+# ---- deps: a virtual environment with the dependencies only, keyed on the lock of EXTRAS ----
 FROM ${BASE_IMAGE} AS deps
 ARG EXTRAS
 ENV PIP_NO_CACHE_DIR=1 \
@@ -20,16 +20,15 @@ ENV PIP_NO_CACHE_DIR=1 \
     PATH=/opt/venv/bin:$PATH
 RUN python3 -m venv /opt/venv
 WORKDIR /src
-COPY pyproject.toml ./
-# The list comes from [project].dependencies plus the EXTRAS' lists (tomllib: Python >= 3.11): one source of
-# truth. The libraries' own test suites (~70 MB) are never imported at runtime. The .pth puts the package
-# directory (filled by the `package` stage) on the venv's path.
-RUN python3 -c "import os, tomllib; p = tomllib.load(open('pyproject.toml', 'rb'))['project']; \
-extras = [e for e in os.environ.get('EXTRAS', '').split(',') if e]; \
-print('\n'.join(p['dependencies'] + [d for e in extras for d in p['optional-dependencies'][e]]))" \
-        > /tmp/requirements.txt \
-    && pip install --prefer-binary -r /tmp/requirements.txt "setuptools>=68" wheel \
-    && rm /tmp/requirements.txt \
+COPY requirements/ ./requirements/
+# The exact versions CI tested: requirements/base.lock, or <EXTRAS>.lock (`make lock` writes them from
+# pyproject.toml's ranges), every file checked against its hash. The build backend comes after, for the
+# `package` stage only. The libraries' own test suites (~70 MB) are never imported at runtime. The .pth puts
+# the package directory (filled by the `package` stage) on the venv's path.
+RUN lock="requirements/${EXTRAS:-base}.lock" \
+    && { [ -f "$lock" ] || { echo "no $lock: EXTRAS is empty or one of base, postgres, dev" >&2; exit 1; }; } \
+    && pip install --prefer-binary --require-hashes -r "$lock" \
+    && pip install "setuptools>=77,<100" "wheel>=0.43,<1" \
     && find /opt/venv -type d -name tests -prune -exec rm -rf {} + \
     && echo /opt/shapebag/lib > "$(python3 -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/shapebag.pth"
 

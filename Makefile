@@ -2,40 +2,67 @@
 PY      ?= python3
 VENV    ?= .venv
 BIN     := $(VENV)/bin
-DATA    ?= var/data
+# your data directory and port: SHAPEBAG_DATA_DIR / SHAPEBAG_PORT as the service reads them, else data/ (data/README.md)
+DATA    ?= $(or $(SHAPEBAG_DATA_DIR),data)
 DEMO    ?= var/demo
-PORT    ?= 8000
-DATASET ?= ../shared/datasets/shrec11-simplified
+PORT    ?= $(or $(SHAPEBAG_PORT),8000)
+# the evaluation datasets, never in the repository: SHAPEBAG_DATASETS, else ../shared/datasets beside it
+DATASETS ?= $(or $(SHAPEBAG_DATASETS),../shared/datasets)
+export SHAPEBAG_DATASETS := $(abspath $(DATASETS))
+DATASET ?= $(SHAPEBAG_DATASETS)/shrec11-simplified
+# the exact versions installed (pyproject.toml keeps the ranges; `make lock` rewrites these)
+LOCK    := requirements/dev.lock
+LOCKS   := requirements/base.lock requirements/postgres.lock $(LOCK)
+# make test's parallel pytest processes (pytest-xdist): auto = one per core; a module's tests stay on one
+# process, so its module-scoped servers and data dirs are built once
+TEST_WORKERS ?= auto
+XDIST   := -n $(TEST_WORKERS) --dist loadscope
 DOCKER_UP ?= ../shared/containers/docker-up.sh
 SHIPPED_VOCAB   := app/data/vocabulary/default
 VOCAB_CLASSES   ?= 8
 VOCAB_PER_CLASS ?= 12
 
 .DEFAULT_GOAL := help
-.PHONY: help install run serve test test-fast test-scale postgres chromium lint format evaluate vocabulary bench docker-lint docker-test mutate clean clean-demo clean-data
+.PHONY: help install lock run serve test test-all test-fast test-scale postgres chromium lint format evaluate vocabulary bench docker-lint docker-test mutate clean clean-demo clean-data
 
 help:  ## list the commands
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) \
-	  | sed 's|\$$(PORT)|$(PORT)|g; s|\$$(DATA)|$(DATA)|g; s|\$$(DEMO)|$(DEMO)|g' \
+	  | sed 's|\$$(PORT)|$(PORT)|g; s|\$$(DATA)|$(DATA)|g; s|\$$(DEMO)|$(DEMO)|g; s|\$$(LOCK)|$(LOCK)|g' \
 	  | awk -F':.*## ' '{printf "  make %-12s %s\n", $$1, $$2}'
 
-$(BIN)/shapebag: pyproject.toml
-	@echo "installing shapebag and its dependencies into $(VENV) (the first time: a minute or two) ..."
+# stops a target that needs a dataset, naming it and how to get it: $(call need_dataset,FOLDER,NAME,MARKER)
+need_dataset = @test -f "$(1)/$(3)" || { echo "make: dataset $(2) not found at $(1): set SHAPEBAG_DATASETS \
+to the folder holding $(2)/ (data/README.md says how to get it)" >&2; exit 2; }
+
+$(BIN)/shapebag: pyproject.toml $(LOCK)
+	@echo "installing shapebag and the locked versions of its dependencies into $(VENV) (the first time: a minute or two) ..."
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e '.[dev]'
+	$(BIN)/pip install -q --require-hashes -r $(LOCK)
+	$(BIN)/pip install -q --no-deps -e .
 	@touch $@
 
-install: $(BIN)/shapebag  ## create .venv and install shapebag with its dev tools
+install: $(BIN)/shapebag  ## create .venv: the locked dependencies ($(LOCK)) and shapebag, editable
+
+lock: install  ## rewrite requirements/*.lock (hashes) from pyproject.toml's ranges: UPGRADE=1 takes the newest
+	@for extras in base postgres dev; do \
+	  flags=$$([ $$extras = base ] || echo "--extra $$extras"); \
+	  $(BIN)/uv pip compile pyproject.toml $$flags --universal --python-version 3.11 --generate-hashes \
+	    $$([ "$(UPGRADE)" = 1 ] && echo --upgrade) --quiet --no-header -o requirements/$$extras.lock || exit 1; \
+	done; echo "wrote $(LOCKS): review, then make install"
 
 run: install  ## quick start: the synthetic demo corpus in $(DEMO), served on 127.0.0.1:$(PORT) (dev mode)
 	$(BIN)/shapebag demo --data-dir $(DEMO) --port $(PORT)
 
-serve: install  ## serve your own data directory $(DATA) (empty at first; dev mode unless SHAPEBAG_ADMIN_TOKEN is set)
+serve: install  ## serve your data directory $(DATA)/ (SHAPEBAG_DATA_DIR; empty at first; dev mode unless SHAPEBAG_ADMIN_TOKEN is set)
 	$(BIN)/shapebag serve --data-dir $(DATA) --port $(PORT) $$([ -z "$$SHAPEBAG_ADMIN_TOKEN" ] && echo --dev)
 
-test: install chromium  ## the whole suite, ~15 min on 2 cores; starts (then stops) a Docker engine
-	$(BIN)/pytest -q
+test: install  ## the quick suite, in parallel (a few minutes on 2 cores); tests needing a dataset skip, saying which
+	$(BIN)/pytest -q $(XDIST) -m "not slow and not docker"
+
+test-all: install chromium  ## everything, what CI runs: + dataset-wide, live servers, browsers, Docker (~15 min on 2 cores)
+	$(BIN)/pytest -q $(XDIST) -m "not slow and not docker"
+	$(BIN)/pytest -q -m "slow or docker"
 
 chromium:  ## Debian's chromium for the browser tests (installed as root; otherwise says they will skip)
 	@bash .ci/chromium.sh
@@ -47,8 +74,7 @@ test-scale: install postgres  ## PostgreSQL suites (claim race, killed worker, 2
 postgres:  ## Debian's postgresql for test-scale (installed as root; otherwise says its cases will skip)
 	@bash .ci/postgres.sh
 
-test-fast: install  ## the suite without slow (dataset-wide, multi-process) tests
-	$(BIN)/pytest -q -m "not slow and not docker"
+test-fast: test  # the former name of `make test`
 
 lint: install  ## ruff + mypy
 	$(BIN)/ruff check app tests benchmarks
@@ -58,16 +84,22 @@ format: install  ## ruff format + autofix
 	$(BIN)/ruff check --fix app tests benchmarks
 	$(BIN)/ruff format app tests benchmarks
 
-evaluate: install  ## Table 2 on SHREC'11 (DATASET=...)
+evaluate: install  ## Table 2 on SHREC'11 (SHAPEBAG_DATASETS or DATASET=folder-with-labels.csv)
+	$(call need_dataset,$(DATASET),shrec11-simplified,labels.csv)
 	$(BIN)/shapebag evaluate $(DATASET)
+
+# one BLAS/OpenMP thread throughout: the same files from the same code on one machine (pool processes pin
+# themselves; the variables also cover the corpus generation and the command's own process)
+PINNED := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 PYTHONHASHSEED=0
 
 vocabulary: install  ## refit the shipped app/data/vocabulary/default (synthetic corpus VOCAB_CLASSES x VOCAB_PER_CLASS, seed 0)
 	rm -rf var/corpus-vocab var/vocabulary-default
-	$(BIN)/python -c "from app.datasets.synthetic import generate; generate('var/corpus-vocab', classes=$(VOCAB_CLASSES), per_class=$(VOCAB_PER_CLASS), seed=0)"
-	$(BIN)/shapebag vocabulary fit var/corpus-vocab --out var/vocabulary-default --size 64 --run run5 --seed 0
+	$(PINNED) $(BIN)/python -c "from app.datasets.synthetic import generate; generate('var/corpus-vocab', classes=$(VOCAB_CLASSES), per_class=$(VOCAB_PER_CLASS), seed=0)"
+	$(PINNED) $(BIN)/shapebag vocabulary fit var/corpus-vocab --out var/vocabulary-default --size 64 --run run5 --seed 0
 	@echo "compare with $(SHIPPED_VOCAB), then: rm -rf $(SHIPPED_VOCAB) && mv var/vocabulary-default $(SHIPPED_VOCAB)"
 
-bench: install  ## short benchmark suite (prints tables, writes results/*.json)
+bench: install  ## short benchmark suite on SHREC'11 (prints tables, writes results/*.json)
+	$(call need_dataset,$(DATASET),shrec11-simplified,labels.csv)
 	$(BIN)/python -m benchmarks.run --short
 
 MUTATE          ?=
@@ -75,11 +107,8 @@ MUTATE_CHILDREN ?= 1
 
 mutate: install  ## mutation testing (mutmut) of app/core + listed api/services/storage modules; score per module
 	@# MUTATE='app.storage.jobs* app.core.hks*' limits the run to those mutant names (default: all).
-	@# The tests find ../shared/datasets relative to their own path, one level deeper under mutants/:
-	@# a link shared -> ../shared lives only while mutmut runs.
-	@created=; if [ ! -e shared ]; then ln -s ../shared shared; created=1; fi; \
+	@# The tests under mutants/ find the datasets through SHAPEBAG_DATASETS, exported above as an absolute path.
 	$(BIN)/mutmut run --max-children $(MUTATE_CHILDREN) $(MUTATE); rc=$$?; \
-	if [ -n "$$created" ]; then rm -f shared; fi; \
 	$(BIN)/python tools/mutation_report.py; exit $$rc
 
 docker-lint: install  ## hadolint the Dockerfile; `docker compose config -q` where compose v2 is installed

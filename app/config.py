@@ -5,6 +5,7 @@ from __future__ import annotations
 import ipaddress
 import os
 from importlib import resources
+from importlib.util import find_spec
 from pathlib import Path
 from typing import Literal
 
@@ -46,6 +47,13 @@ class DescribeSettings(BaseModel):
             raise ValueError(f"must be one of {', '.join(SUBDIVISIONS)}")
         return value
 
+    @field_validator("remesh")
+    @classmethod
+    def _remesher_installed(cls, value: bool) -> bool:  # an extra: say how to get it before any upload
+        if value and find_spec("gpytoolbox") is None:
+            raise ValueError("remeshing needs gpytoolbox: pip install 'shapebag[remesh]'")
+        return value
+
     @field_validator("smoothing_weights")
     @classmethod
     def _known_smoothing_weights(cls, value: str) -> str:  # the core's list, not a copy of it
@@ -82,7 +90,7 @@ class StorageSettings(BaseModel):
 class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="SHAPEBAG_", env_nested_delimiter="__", extra="ignore")
 
-    data_dir: Path = Path("var/data")
+    data_dir: Path = Path("data")  # the repository's data/ when run from a checkout (data/README.md)
     database_url: str = ""  # empty: SQLite in data_dir; postgresql://...: shared state there (docs/deploy.md)
     # filesystem: meshes and descriptions under data_dir; database: in the database, data_dir caches them
     blob_backend: Literal["filesystem", "database"] = "filesystem"

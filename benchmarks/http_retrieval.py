@@ -26,10 +26,11 @@ import httpx
 import numpy as np
 
 from app.core import metrics
+from app.datasets import locate
 from benchmarks.common import table, write_json
 from benchmarks.service import free_port, start_server, stop_server
 
-DEFAULT_DIR = Path("../shared/datasets/shrec11-simplified")
+DEFAULT_DIR = locate.dataset_dir("shrec11-simplified")  # SHAPEBAG_DATASETS/shrec11-simplified
 MAX_K = 100
 
 
@@ -96,6 +97,8 @@ def main() -> None:
                     help="extra server setting, e.g. SHAPEBAG_ENCODE__FUSION=false (repeatable)")
     ap.add_argument("--timeout", type=float, default=3600, help="seconds to wait for ingestion")
     args = ap.parse_args()
+    if not (args.directory / "labels.csv").is_file():
+        ap.exit(2, f"{locate.missing_reason('shrec11-simplified') or f'no labels.csv in {args.directory}'}\n")
     items = read_labels(args.directory)
     for pair in args.env:
         name, _, value = pair.partition("=")

@@ -34,11 +34,10 @@ from pathlib import Path
 import httpx
 import numpy as np
 
+from app.datasets import locate
 from benchmarks.common import REPO_ROOT, table, write_json
 
-SHREC = Path(
-    os.environ.get("SHAPEBAG_SHREC", REPO_ROOT.parent / "shared" / "datasets" / "shrec11-simplified")
-)
+SHREC = locate.dataset_dir("shrec11-simplified")  # SHAPEBAG_DATASETS/shrec11-simplified
 FAST_ENV = {
     "SHAPEBAG_DESCRIBE__K": "40",
     "SHAPEBAG_DESCRIBE__M": "20",

@@ -8,7 +8,6 @@ gives smooth, watertight, single-component meshes at the resolutions a user woul
 from __future__ import annotations
 
 import csv
-import os
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -17,23 +16,17 @@ import trimesh
 
 from app.core.mesh import Mesh, load_mesh
 from app.core.resolution import simplify
-
-DEFAULT_DATASET = Path("/work/shared/datasets/shrec11-simplified")
+from app.datasets import locate
 
 
 def dataset_dir() -> Path:
-    """SHAPEBAG_DATASET, else the shared copy, else ../shared/datasets/... relative to the repo."""
-    env = os.environ.get("SHAPEBAG_DATASET")
-    if env:
-        return Path(env)
-    if DEFAULT_DATASET.exists():
-        return DEFAULT_DATASET
-    return Path(__file__).resolve().parents[2] / "shared" / "datasets" / "shrec11-simplified"
+    """SHAPEBAG_DATASETS/shrec11-simplified (app/datasets/locate.py)."""
+    return locate.dataset_dir("shrec11-simplified")
 
 
 def labelled_files(root: Path | None = None) -> list[tuple[Path, str]]:
     """[(path, class)] from labels.csv, in file order."""
-    root = root or dataset_dir()
+    root = root or locate.require("shrec11-simplified")  # DatasetMissing: names it and how to get it
     with open(root / "labels.csv", newline="") as fh:
         return [(root / row["file"], row["class"]) for row in csv.DictReader(fh)]
 

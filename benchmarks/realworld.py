@@ -23,7 +23,6 @@ import argparse
 import fnmatch
 import io
 import json
-import os
 import subprocess
 import sys
 import time
@@ -32,11 +31,10 @@ from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from app.datasets import locate
 from benchmarks.common import REPO_ROOT, peak_rss_mb, table, thread_env, write_json
 
-CORPUS = Path(
-    os.environ.get("SHAPEBAG_REALWORLD", REPO_ROOT.parent / "shared" / "datasets" / "realworld")
-)
+CORPUS = locate.dataset_dir("realworld")  # SHAPEBAG_DATASETS/realworld
 NOT_MESHES = {"README.md", "SOURCES.csv", "STATS.csv"}
 OUTCOMES = ("described", "refused", "error", "crash", "timeout")
 TOLERANCE = 1.5  # the canonical-resolution band of resolution.to_resolution
@@ -288,7 +286,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="adaptive smoothing's roughness target (default: the shipped one; 0: fixed steps)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    overrides = {key: value for key in ("target_vertices", "k", "smoothing", "smoothing_weights", "smoothing_target")
+    keys = ("target_vertices", "k", "smoothing", "smoothing_weights", "smoothing_target")
+    overrides = {key: value for key in keys
                  if (value := getattr(args, key)) is not None}
     if args.child:
         print(json.dumps(describe_upload(args.child, args.baseline, overrides)))
@@ -301,7 +300,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"realworld: {exc}")
         return 2
     if not CORPUS.is_dir():
-        print(f"no corpus at {CORPUS} (set SHAPEBAG_REALWORLD)")
+        print(f"realworld: {locate.missing_reason('realworld')}")
         return 1
     patterns = args.files or ["*"]
     entries = corpus_entries(CORPUS, patterns)

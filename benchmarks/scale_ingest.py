@@ -23,8 +23,10 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from app.datasets import locate
+
 CTX = multiprocessing.get_context("spawn")
-DATASET = Path(__file__).resolve().parents[2] / "shared" / "datasets" / "shrec11-simplified"
+DATASET = locate.dataset_dir("shrec11-simplified")  # SHAPEBAG_DATASETS/shrec11-simplified
 
 
 def meshes(root: Path, n: int) -> list[tuple[Path, str]]:

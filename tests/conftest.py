@@ -4,7 +4,7 @@ a seeded data directory (models ingested, a small vocabulary fitted) that tests 
 from __future__ import annotations
 
 import csv
-import os
+import fcntl
 import shutil
 import time
 from dataclasses import dataclass
@@ -13,16 +13,27 @@ from pathlib import Path
 import pytest
 
 from app.config import DescribeSettings, Settings
+from app.datasets import locate
 
-SHREC = Path(
-    os.environ.get(
-        "SHAPEBAG_SHREC", Path(__file__).resolve().parents[2] / "shared" / "datasets" / "shrec11-simplified"
-    )
-)
+SHREC = locate.dataset_dir("shrec11-simplified")  # SHAPEBAG_DATASETS (app/datasets/locate.py)
 CLASSES = 4
 PER_CLASS = 4  # 3 seeded + 1 held out for uploads
 TEST_WORDS = 16
 TEST_VERTICES = 300  # SHREC meshes (~250 vertices) stay as they are; finer ones are simplified to ~300
+
+
+def dataset_or_skip(name: str) -> Path:
+    """The folder of dataset `name`, or skip the test with a message naming it and how to get it."""
+    reason = locate.missing_reason(name)
+    if reason is not None:
+        pytest.skip(reason)
+    return locate.dataset_dir(name)
+
+
+def needs_dataset(name: str) -> pytest.MarkDecorator:
+    """Mark: skip unless dataset `name` is present (the reason says how to get it)."""
+    reason = locate.missing_reason(name)
+    return pytest.mark.skipif(reason is not None, reason=reason or "")
 
 
 @dataclass(frozen=True)
@@ -51,7 +62,7 @@ def _pick(root: Path) -> list[tuple[Path, str]]:
 @pytest.fixture(scope="session")
 def corpus(tmp_path_factory) -> Corpus:
     """A few SHREC'11 meshes (~250 vertices) when the dataset is present, else a synthetic corpus."""
-    if (SHREC / "labels.csv").is_file():
+    if locate.missing_reason("shrec11-simplified") is None:
         return Corpus(SHREC, _pick(SHREC))
     from app.datasets.synthetic import generate
 
@@ -86,14 +97,30 @@ def settings(tmp_path) -> Settings:
 
 
 @pytest.fixture(scope="session")
-def seeded_dir(tmp_path_factory, corpus) -> Path:
-    """A data dir with the seeded corpus ingested and a TEST_WORDS-word vocabulary active (built once)."""
+def seeded_dir(tmp_path_factory, corpus, worker_id) -> Path:
+    """A data dir with the seeded corpus ingested and a TEST_WORDS-word vocabulary active, built once per
+    test run: under pytest-xdist the first worker builds it in the run's shared temp dir (under a lock) and
+    the others wait and reuse it. Read-only: tests copy it (`data_dir`)."""
+    if worker_id == "master":  # not under xdist
+        return _build_seeded(tmp_path_factory.mktemp("seeded") / "data", corpus)
+    shared = tmp_path_factory.getbasetemp().parent  # one per test run, common to its workers
+    done = shared / "seeded" / "data"
+    with open(shared / "seeded.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if not done.is_dir():
+            building = shared / f"seeded-{worker_id}"
+            _build_seeded(building / "data", corpus)
+            done.parent.mkdir(exist_ok=True)
+            (building / "data").rename(done)
+    return done
+
+
+def _build_seeded(data_dir: Path, corpus: Corpus) -> Path:
     from app.services import ingestion
     from app.services.context import open_context
     from app.storage import jobs as jobs_repo
     from app.worker.runner import Worker
 
-    data_dir = tmp_path_factory.mktemp("seeded") / "data"
     ctx = open_context(make_settings(data_dir))
     for path, label in corpus.seeded:
         ingestion.submit(ctx, path.read_bytes(), path.name, name=f"{label}-{path.stem}", label=label)
@@ -103,6 +130,13 @@ def seeded_dir(tmp_path_factory, corpus) -> Path:
         jobs_repo.enqueue(conn, "rebuild_vocabulary", payload={"size": TEST_WORDS})
     worker.run_forever(exit_when_idle=True)
     return data_dir
+
+
+@pytest.fixture(scope="session")
+def worker_id(request) -> str:
+    """pytest-xdist's worker name ("gw0", ...), or "master" in a plain run: xdist's fixture of that name,
+    also where the plugin is not installed."""
+    return getattr(request.config, "workerinput", {}).get("workerid", "master")
 
 
 @pytest.fixture

@@ -53,3 +53,35 @@ def test_encode_defaults_are_the_core_defaults_and_bad_values_are_refused(monkey
     monkeypatch.setenv("SHAPEBAG_ENCODE__MODE", "hard")
     monkeypatch.setenv("SHAPEBAG_ENCODE__SIGMA_SCALE", "0.7")
     assert (Settings().encode.params().mode, Settings().encode.params().sigma_scale) == ("hard", 0.7)
+
+
+def test_remeshing_without_its_extra_is_refused_at_start_saying_how_to_get_it(monkeypatch):
+    import app.config
+
+    monkeypatch.setenv("SHAPEBAG_DESCRIBE__REMESH", "true")
+    assert Settings().describe.params().remesh  # gpytoolbox is installed here (the dev extra holds it)
+    monkeypatch.setattr(app.config, "find_spec", lambda name: None if name == "gpytoolbox" else object())
+    with pytest.raises(pydantic.ValidationError, match=r"shapebag\[remesh\]"):
+        Settings()
+    monkeypatch.setenv("SHAPEBAG_DESCRIBE__REMESH", "false")
+    assert not Settings().describe.params().remesh  # the default needs nothing more
+
+
+def test_the_default_data_dir_is_data_and_the_datasets_come_from_one_setting(monkeypatch, tmp_path):
+    from app.datasets import locate
+
+    monkeypatch.delenv("SHAPEBAG_DATA_DIR", raising=False)
+    assert str(Settings().data_dir) == "data"
+    monkeypatch.setenv("SHAPEBAG_DATASETS", str(tmp_path))
+    assert locate.dataset_dir("realworld") == tmp_path / "realworld"
+    reason = locate.missing_reason("shrec11-simplified")
+    assert reason and str(tmp_path / "shrec11-simplified") in reason and "SHAPEBAG_DATASETS" in reason
+    with pytest.raises(locate.DatasetMissing, match="shrec11-simplified"):
+        locate.require("shrec11-simplified")
+    (tmp_path / "shrec11-simplified").mkdir()
+    assert locate.missing_reason("shrec11-simplified") is not None  # a folder without labels.csv is not it
+    (tmp_path / "shrec11-simplified" / "labels.csv").write_text("file,class\n")
+    assert locate.require("shrec11-simplified") == tmp_path / "shrec11-simplified"
+    assert locate.main(["shrec11-simplified", "realworld"]) == 2  # realworld is still missing
+    monkeypatch.delenv("SHAPEBAG_DATASETS")
+    assert locate.datasets_root() == locate.REPO_ROOT.parent / "shared" / "datasets"

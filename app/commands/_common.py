@@ -1,9 +1,10 @@
 """Helpers shared by the CLI commands (settings from flags + SHAPEBAG_* env).
 
 The data directory is resolved explicitly, in this order, and every command says which one it uses:
-`--data-dir` > `$SHAPEBAG_DATA_DIR` > `var/data` under the current directory (DEFAULT_DATA_DIR). A command
-that only reads (`search`, `vocabulary show`) refuses a directory holding no database instead of creating
-an empty one there: run from another folder, it would otherwise answer "no vocabulary is active yet".
+`--data-dir` > `$SHAPEBAG_DATA_DIR` > `data` under the current directory (DEFAULT_DATA_DIR: in a checkout,
+its data/). A command that only reads (`search`, `vocabulary show`) refuses a directory holding no database
+instead of creating an empty one there: run from another folder, it would otherwise answer "no vocabulary
+is active yet".
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from pathlib import Path
 
 from app.cli import CommandError
 
-DEFAULT_DATA_DIR = Path("var/data")
+DEFAULT_DATA_DIR = Path("data")
 DATABASE_FILE = "shapebag.db"  # app.services.context opens <data dir>/shapebag.db
 
 

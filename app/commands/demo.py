@@ -1,7 +1,7 @@
 """`shapebag demo`: generate the synthetic corpus (if absent), ingest it, serve it. `make run` runs this.
 
 The demo lives in its own data directory (`make run`: var/demo), never in the one holding your models
-(`make serve`: var/data): its synthetic "hand" or "biped" shapes would otherwise answer real queries."""
+(`make serve`: data/): its synthetic "hand" or "biped" shapes would otherwise answer real queries."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 from app.commands._common import settings_from
 
-DEMO_DATA_DIR = Path("var/demo")  # apart from var/data (the user's): `make clean-demo` removes it
+DEMO_DATA_DIR = Path("var/demo")  # apart from data/ (the user's): `make clean-demo` removes it
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -51,6 +51,8 @@ def run_fit(args: argparse.Namespace) -> int:
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
 
+    from threadpoolctl import threadpool_limits
+
     from app.core.fusion import DEFAULT_WEIGHT
     from app.core.vocabulary import Vocabulary
     from app.datasets.folder import DatasetError, read_mesh_folder
@@ -93,9 +95,12 @@ def run_fit(args: argparse.Namespace) -> int:
     weight = DEFAULT_WEIGHT if args.fusion_weight is None else args.fusion_weight
     meta["command"] += f" --fusion-weight {weight}"
     try:
-        vocab = Vocabulary.fit(descriptions, size=args.size, run=args.run, seed=args.seed, metadata=meta)
-        # the fusion scales: BoF under the encode settings in force, Shape-DNA, of these same shapes
-        vocab = vocab.with_fusion(descriptions, settings.encode.params(), weight)
+        # one thread: k-means sums its clusters in per-thread chunks, so the thread count would move the
+        # centres in the last digits (the describing processes above are pinned the same way)
+        with threadpool_limits(1):
+            vocab = Vocabulary.fit(descriptions, size=args.size, run=args.run, seed=args.seed, metadata=meta)
+            # the fusion scales: BoF under the encode settings in force, Shape-DNA, of these same shapes
+            vocab = vocab.with_fusion(descriptions, settings.encode.params(), weight)
     except ValueError as exc:
         raise CommandError(str(exc)) from exc
     vocab.save(args.out)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import threading
 
 import numpy as np
+import pytest
 from fastapi.testclient import TestClient
 
 from app.main import create_app
@@ -40,6 +41,7 @@ def test_default_admin_token_is_refused_outside_dev_mode(tmp_path):
     create_app(make_settings(tmp_path, dev_mode=False, admin_token="s3cret" * 6))  # a real secret is fine
 
 
+@pytest.mark.slow  # two worker processes and a searching thread across a rebuild
 def test_rebuild_swaps_versions_while_searches_keep_answering(data_dir, corpus):
     with TestClient(create_app(make_settings(data_dir, workers=2))) as client:
         models = client.get("/models", params={"limit": 100}).json()["data"]

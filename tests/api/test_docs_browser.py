@@ -4,9 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from tests.api.live import live_server
 from tests.api.test_web_browser import VIEWPORT, launch, needs_chromium
 from tests.conftest import make_settings
+
+pytestmark = pytest.mark.slow  # a real browser: the second tier (make test-all)
 
 
 @needs_chromium

@@ -21,6 +21,8 @@ from tests.api.live import live_server
 from tests.api.test_web_browser import VIEWPORT, launch, needs_chromium, wait_until
 from tests.conftest import make_settings, wait_for
 
+pytestmark = pytest.mark.slow  # a real browser: the second tier (make test-all)
+
 REPO = Path(__file__).resolve().parents[2]
 SHOTS = Path(os.environ.get("SHAPEBAG_SCREENSHOTS", REPO / "results" / "screenshots"))
 
@@ -51,7 +53,6 @@ def _pixels(path: Path) -> np.ndarray:
     return np.asarray(Image.open(path).convert("RGB")).astype(int)
 
 
-@pytest.mark.slow
 @needs_chromium
 def test_quick_start_upload_results_viewer_and_explanation(tmp_path: Path, corpus) -> None:
     from playwright.sync_api import sync_playwright

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # a real browser: the second tier (make test-all)
+
 CHROMIUM = next((p for p in map(shutil.which, ("chromium", "chromium-browser", "google-chrome")) if p), None)
 CHROMIUM_ARGS = [  # no GPU, no sandbox as root, and no background calls to a network that is closed
     "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--disable-background-networking",
@@ -128,7 +130,6 @@ needs_chromium = pytest.mark.skipif(
 )
 
 
-@pytest.mark.slow
 @needs_chromium
 def test_upload_shows_ranked_thumbnails_with_labels_and_distances(
     served: str, corpus, tmp_path: Path
@@ -163,7 +164,6 @@ def _assert_screenshot_shows_results(path: Path) -> None:
     assert shape_pixels.mean() > 0.02
 
 
-@pytest.mark.slow
 @needs_chromium
 def test_browse_filter_similar_and_error_message(served: str, corpus) -> None:
     from playwright.sync_api import sync_playwright

@@ -9,10 +9,9 @@ import numpy as np
 import pytest
 
 from benchmarks import common, large_inputs, realworld, selfretrieval
+from tests.conftest import needs_dataset
 
-needs_corpus = pytest.mark.skipif(
-    not realworld.CORPUS.is_dir(), reason="the realworld corpus is not on this machine (../shared)"
-)
+needs_corpus = needs_dataset("realworld")
 
 
 @pytest.fixture(autouse=True)

@@ -8,11 +8,9 @@ import numpy as np
 import pytest
 
 from benchmarks import common, describe, quality, realbof, search, service, throughput
-from benchmarks.meshes import dataset_dir
+from tests.conftest import needs_dataset as _needs
 
-needs_dataset = pytest.mark.skipif(
-    not (dataset_dir() / "labels.csv").exists(), reason="the SHREC'11 dataset folder is not on this machine"
-)
+needs_dataset = _needs("shrec11-simplified")
 
 
 @pytest.fixture(autouse=True)

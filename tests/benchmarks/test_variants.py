@@ -11,19 +11,17 @@ import pytest
 from app.core.mesh import load_mesh
 from app.datasets.folder import read_labelled_folder
 from benchmarks.variants import generate
-
-SHREC = Path(__file__).resolve().parents[3] / "shared" / "datasets" / "shrec11-simplified"
+from tests.conftest import dataset_or_skip
 
 
 @pytest.fixture(scope="module")
 def source(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    if not SHREC.exists():
-        pytest.fail(f"dataset missing at {SHREC}: the tests read it from ../shared")
+    shrec = dataset_or_skip("shrec11-simplified")
     root = tmp_path_factory.mktemp("src")
     lines = ["file,class,split"]
     for cls in ("alien", "hand"):
         (root / cls).mkdir()
-        for src in sorted((SHREC / cls / "train").glob("*.obj"))[:2]:
+        for src in sorted((shrec / cls / "train").glob("*.obj"))[:2]:
             shutil.copy(src, root / cls / src.name)
             lines.append(f"{cls}/{src.name},{cls},train")
     (root / "labels.csv").write_text("\n".join(lines) + "\n")

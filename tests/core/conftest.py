@@ -2,15 +2,11 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import trimesh
 
 from app.core.mesh import Mesh
-
-SHREC = Path(__file__).resolve().parents[3] / "shared" / "datasets" / "shrec11-simplified"
 
 
 @pytest.fixture(scope="session")
@@ -30,11 +26,11 @@ def _random_rotation(seed: int) -> np.ndarray:
 
 @pytest.fixture(scope="session")
 def shrec_mesh() -> Mesh:
-    """One SHREC'11 mesh (~250 vertices); the dataset lives beside the repo, in ../shared."""
-    path = SHREC / "alien" / "train" / "T133.obj"
-    if not path.exists():
-        pytest.fail(f"dataset missing at {path}: the tests read it from ../shared")
+    """One SHREC'11 mesh (~250 vertices) from SHAPEBAG_DATASETS; skips, saying how to get it, without."""
     from app.core.mesh import load_mesh
+    from tests.conftest import dataset_or_skip
+
+    path = dataset_or_skip("shrec11-simplified") / "alien" / "train" / "T133.obj"
 
     return load_mesh(path)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import trimesh
 
 from app.core.mesh import Mesh
@@ -22,6 +23,7 @@ def _split_half(mesh: Mesh) -> Mesh:
     return Mesh(np.vstack([v, centroids]), np.vstack([f[~right], split]))
 
 
+@pytest.mark.slow  # full describes of fine meshes
 def test_a_denser_half_moves_the_integral_less_than_the_vertex_count():
     tm = trimesh.creation.icosphere(subdivisions=4)  # fine enough that both discretisations agree
     tm.vertices *= [1.8, 1.0, 0.6]

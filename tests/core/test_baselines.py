@@ -41,6 +41,7 @@ def capsule() -> Mesh:
     return _mesh(trimesh.creation.capsule(height=3.0, radius=0.6, count=[24, 24]))
 
 
+@pytest.mark.slow  # a large eigenproblem of a fine sphere
 def test_shape_dna_of_a_sphere_follows_the_spectrum() -> None:
     # sphere: λ = l(l+1)/r² with multiplicity 2l+1, area 4πr² -> λ·A = 4π l(l+1)
     # first three non-zero (l = 1): 8π, divided by i = 1, 2, 3

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import io
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,9 +12,11 @@ import trimesh
 from app.core.cleaning import _groups, face_components, merge_vertices, unique_face_index
 from app.core.mesh import InvalidMeshError, Mesh, clean, load_mesh, validate
 from app.core.pipeline import DescribeParams, describe
+from app.datasets import locate
+from tests.conftest import needs_dataset
 
-REALWORLD = Path(__file__).resolve().parents[3] / "shared" / "datasets" / "realworld"
-needs_realworld = pytest.mark.skipif(not REALWORLD.is_dir(), reason=f"realworld corpus absent at {REALWORLD}")
+REALWORLD = locate.dataset_dir("realworld")
+needs_realworld = needs_dataset("realworld")
 
 
 def obj_text(vertices: np.ndarray, faces: np.ndarray) -> bytes:

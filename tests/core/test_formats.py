@@ -22,9 +22,11 @@ from app.core.mesh import (
     detect_format,
     load_mesh,
 )
+from app.datasets import locate
+from tests.conftest import needs_dataset
 
-REALWORLD = Path(__file__).resolve().parents[3] / "shared" / "datasets" / "realworld"
-needs_realworld = pytest.mark.skipif(not REALWORLD.is_dir(), reason=f"realworld corpus absent at {REALWORLD}")
+REALWORLD = locate.dataset_dir("realworld")
+needs_realworld = needs_dataset("realworld")
 # what a user must never read: exception class names, numpy internals, Python object reprs
 INTERNALS = re.compile(
     r"Error\b|Exception|numpy|ndarray|NoneType|object is not|subscriptable|Traceback|\bint\("

@@ -155,6 +155,7 @@ def test_closing_commutes_with_a_similarity_transform():
     assert np.allclose(a.vertices @ rot.T * 3.5 + [1.0, -2.0, 0.5], b.vertices)
 
 
+@pytest.mark.slow  # large eigenproblems of three spheres per case
 @pytest.mark.parametrize("times_index", [20, 40])
 def test_the_heat_kernel_by_a_closed_hole_is_the_whole_spheres_again(times_index: int):
     """On a sphere K_t(x, x) is the same at every point. A hole makes its rim a boundary (Neumann:

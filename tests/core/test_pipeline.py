@@ -36,6 +36,7 @@ def _transformed(mesh: Mesh, rotation: np.ndarray, kind: str) -> Mesh:
     return Mesh(mesh.vertices[perm], np.argsort(perm)[mesh.faces])
 
 
+@pytest.mark.slow  # the full describe (k=300) of a SHREC'11 mesh, four times over
 @pytest.mark.parametrize("kind", ["rotation", "translation", "scale", "permutation"])
 def test_bof_is_unchanged_by_rigid_motion_scale_and_vertex_order(shrec_mesh, random_rotation,
                                                                  base_and_vocabulary, kind):
@@ -135,6 +136,7 @@ def _retriangulated(mesh: Mesh, target: int) -> Mesh:
     return clean(Mesh(v.astype(np.float64), f.astype(np.int64)))
 
 
+@pytest.mark.slow  # several full describes of a SHREC'11 mesh and its re-triangulations
 def test_weyl_time_range_makes_the_hks_less_dependent_on_the_triangulation(shrec_mesh):
     # without smoothing (with it the computed λ_k retrieves better across triangulations, docs/results.md)
     # the SHREC mesh reaches 1000 vertices by midpoint subdivision, its retriangulation by decimation:

@@ -6,9 +6,11 @@ from pathlib import Path
 
 import pytest
 
+from app.datasets import locate
 from app.datasets.folder import DatasetError, LabelledFile, MeshFile, read_labelled_folder, read_mesh_folder
+from tests.conftest import needs_dataset
 
-SHREC = Path(__file__).resolve().parents[3] / "shared" / "datasets" / "shrec11-simplified"
+SHREC = locate.dataset_dir("shrec11-simplified")
 
 
 def _folder(tmp_path: Path, csv_text: str, files: list[str]) -> Path:
@@ -111,7 +113,7 @@ def test_dataset_error_is_a_value_error() -> None:
     assert issubclass(DatasetError, ValueError)
 
 
-@pytest.mark.skipif(not (SHREC / "labels.csv").is_file(), reason="SHREC'11 simplified not present")
+@needs_dataset("shrec11-simplified")
 def test_reads_the_shrec_folder() -> None:
     rows = read_labelled_folder(SHREC)
     assert len(rows) == 600

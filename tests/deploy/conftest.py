@@ -25,7 +25,6 @@ REPO = Path(__file__).resolve().parents[2]
 SHARED = REPO.parent / "shared"  # /work/shared beside /work/main; ../shared in CI
 DOCKER_UP = SHARED / "containers" / "docker-up.sh"
 DOCKER_DOWN = SHARED / "containers" / "docker-down.sh"  # stops only the dockerd docker-up.sh started
-DATASET = SHARED / "datasets" / "shrec11-simplified"
 LOCAL_BASE_IMAGE = "localhost/debian-python:bookworm"
 TEST_IMAGE = "shapebag:compose-test"  # removed by the final `down --rmi all`; the build cache stays
 

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import httpx
 import pytest
 
+from app.datasets import locate
 from tests.deploy.conftest import wait_for
 
 if TYPE_CHECKING:  # conftest is pytest's to import; at runtime the fixture hands the object over
@@ -23,7 +24,7 @@ if TYPE_CHECKING:  # conftest is pytest's to import; at runtime the fixture hand
 
 pytestmark = [pytest.mark.docker, pytest.mark.slow]
 
-DATASET = Path(__file__).resolve().parents[3] / "shared" / "datasets" / "shrec11-simplified"
+DATASET = locate.dataset_dir("shrec11-simplified")
 SHIPPED = Path(__file__).resolve().parents[2] / "app" / "data" / "vocabulary" / "default" / "vocabulary.json"
 WAIT_S = 240  # --wait for build + healthy; each bounded poll below has its own limit
 

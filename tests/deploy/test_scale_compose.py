@@ -26,6 +26,8 @@ from typing import TYPE_CHECKING, Any
 import httpx
 import pytest
 
+from app.datasets import locate
+from tests.conftest import dataset_or_skip
 from tests.deploy.conftest import wait_for as _wait_for
 
 if TYPE_CHECKING:
@@ -34,7 +36,7 @@ if TYPE_CHECKING:
 pytestmark = [pytest.mark.docker, pytest.mark.slow]
 
 REPO = Path(__file__).resolve().parents[2]
-DATASET = REPO.parent / "shared" / "datasets" / "shrec11-simplified"
+DATASET = locate.dataset_dir("shrec11-simplified")
 N_MODELS = 200
 IMAGES = {  # tags of this test; the app image is removed at the end, the two slow-to-build ones are kept
     "SHAPEBAG_IMAGE": "shapebag:scale-compose-test",
@@ -76,8 +78,7 @@ def wait_for(what: str, probe: Callable[[], Any], timeout: float, compose: Compo
 def scale_stack(docker_env: dict[str, str]) -> Iterator[Compose]:
     from tests.deploy.conftest import Compose, free_port
 
-    if not (DATASET / "labels.csv").is_file():
-        pytest.skip(f"the SHREC'11 meshes are not at {DATASET}")
+    dataset_or_skip("shrec11-simplified")
     env = dict(docker_env)
     env.update(
         IMAGES,

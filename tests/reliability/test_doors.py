@@ -66,6 +66,7 @@ def test_refuses_to_start_with_a_default_or_empty_token_outside_dev_mode(tmp_pat
     create_app(make_settings(tmp_path / "d", dev_mode=True, admin_token=token))  # dev mode: allowed
 
 
+@pytest.mark.slow  # starts `shapebag serve` as a process
 def test_serve_without_a_token_exits_with_one_line(tmp_path):
     env = env_for(tmp_path / "d")
     env.pop("SHAPEBAG_ADMIN_TOKEN")

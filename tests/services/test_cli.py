@@ -61,6 +61,7 @@ def test_vocabulary_fit_takes_several_folders_labelled_or_not(folder, tmp_path, 
     assert meta["meshes"] == 6 + loose_meshes and meta["source"] == "folder + loose"
 
 
+@pytest.mark.slow  # the CLI's describing processes, twice, then a vocabulary fit
 def test_ingest_is_resumable_then_search_ranks_and_show_lists(folder, tmp_path, capsys, monkeypatch):
     data = tmp_path / "data"
     monkeypatch.setenv("SHAPEBAG_VOCABULARY_SIZE", "8")

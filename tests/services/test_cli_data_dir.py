@@ -1,4 +1,4 @@
-"""The CLI's data directory: --data-dir > $SHAPEBAG_DATA_DIR > var/data, printed, and never an empty
+"""The CLI's data directory: --data-dir > $SHAPEBAG_DATA_DIR > ./data, printed, and never an empty
 database made up by a read-only command run from the wrong folder (issue 14 item 8)."""
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ def query(tmp_path: Path) -> Path:
 def test_flag_beats_environment_beats_default(tmp_path: Path, monkeypatch) -> None:
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("SHAPEBAG_DATA_DIR", raising=False)
-    assert resolve_data_dir(None) == ((tmp_path / DEFAULT_DATA_DIR).resolve(), "default var/data")
+    assert resolve_data_dir(None) == ((tmp_path / DEFAULT_DATA_DIR).resolve(), "default data")
     monkeypatch.setenv("SHAPEBAG_DATA_DIR", str(tmp_path / "env"))
     assert resolve_data_dir(None) == ((tmp_path / "env").resolve(), "SHAPEBAG_DATA_DIR")
     assert resolve_data_dir(Path("flag")) == ((tmp_path / "flag").resolve(), "--data-dir")
@@ -33,7 +33,7 @@ def test_the_demo_never_takes_the_users_data_dir_from_the_environment(tmp_path: 
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("SHAPEBAG_DATA_DIR", str(tmp_path / "mine"))
     path, _ = resolve_data_dir(None, DEMO_DATA_DIR, use_env=False)
-    assert path == (tmp_path / "var" / "demo").resolve() and path != (tmp_path / "var" / "data").resolve()
+    assert path == (tmp_path / "var" / "demo").resolve() and path != (tmp_path / "data").resolve()
 
 
 @pytest.mark.parametrize("how", ["flag", "env", "default"])
@@ -51,7 +51,7 @@ def test_search_refuses_a_missing_data_dir_naming_it_and_creates_nothing(
     elif how == "env":
         monkeypatch.setenv("SHAPEBAG_DATA_DIR", str(missing))
     else:
-        missing = elsewhere / "var" / "data"
+        missing = elsewhere / "data"
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert str(missing) in err and "no shapebag data" in err

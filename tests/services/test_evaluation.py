@@ -17,20 +17,19 @@ from app.core.vocabulary import Vocabulary
 from app.services import evaluation_cache
 from app.services.evaluation import EvaluationError, EvaluationOptions, evaluate
 from app.services.evaluation_report import format_table, to_json
+from tests.conftest import dataset_or_skip
 
-SHREC = Path(__file__).resolve().parents[3] / "shared" / "datasets" / "shrec11-simplified"
 CLASSES = ("alien", "ants", "armadillo")
 
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    if not SHREC.exists():
-        pytest.fail(f"dataset missing at {SHREC}: the tests read it from ../shared")
+    shrec = dataset_or_skip("shrec11-simplified")
     root = tmp_path_factory.mktemp("subset")
     lines = ["file,class"]
     for cls in CLASSES:
         (root / cls).mkdir()
-        for src in sorted((SHREC / cls / "train").glob("*.obj"))[:4]:
+        for src in sorted((shrec / cls / "train").glob("*.obj"))[:4]:
             shutil.copy(src, root / cls / src.name)
             lines.append(f"{cls}/{src.name},{cls}")
     (root / "labels.csv").write_text("\n".join(lines) + "\n")
@@ -197,6 +196,7 @@ def test_bad_folders_give_clear_errors(folder: Path, tmp_path: Path) -> None:
             evaluate(folder, _options(tmp_path / "c", rows=("run5",), sigma_scale=sigma))
 
 
+@pytest.mark.slow  # the evaluation command end to end on the SHREC'11 subset
 def test_command_prints_the_table_and_writes_json(
     folder: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
