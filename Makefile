@@ -23,7 +23,7 @@ VOCAB_CLASSES   ?= 8
 VOCAB_PER_CLASS ?= 12
 
 .DEFAULT_GOAL := help
-.PHONY: help install lock run serve test test-all test-fast test-scale postgres chromium lint format evaluate vocabulary bench docker-lint docker-test mutate clean clean-demo clean-data
+.PHONY: help docs install lock run serve test test-all test-fast test-scale postgres chromium lint format evaluate vocabulary bench docker-lint docker-test mutate clean clean-demo clean-data
 
 help:  ## list the commands
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) \
@@ -76,6 +76,9 @@ postgres:  ## Debian's postgresql for test-scale (installed as root; otherwise s
 
 test-fast: test  # the former name of `make test`
 
+docs: install  ## the documentation site (MkDocs Material) built strictly into site/: a broken link or a page outside the nav fails
+	$(BIN)/mkdocs build --strict --site-dir site
+
 lint: install  ## ruff + mypy
 	$(BIN)/ruff check app tests benchmarks
 	$(BIN)/mypy app
@@ -111,7 +114,10 @@ mutate: install  ## mutation testing (mutmut) of app/core + listed api/services/
 	$(BIN)/mutmut run --max-children $(MUTATE_CHILDREN) $(MUTATE); rc=$$?; \
 	$(BIN)/python tools/mutation_report.py; exit $$rc
 
-docker-lint: install  ## hadolint the Dockerfile; `docker compose config -q` where compose v2 is installed
+docker-docs: install  ## the documentation site (MkDocs Material) built strictly into site/: a broken link or a page outside the nav fails
+	$(BIN)/mkdocs build --strict --site-dir site
+
+lint: install  ## hadolint the Dockerfile; `docker compose config -q` where compose v2 is installed
 	$(BIN)/hadolint Dockerfile && echo "Dockerfile: hadolint clean"
 	@plugin=$$(bash $(DOCKER_UP) --env 2>/dev/null | sed -n 's/^export DOCKER_CONFIG=//p'); \
 	if [ -n "$$plugin" ] && [ -x "$$plugin/cli-plugins/docker-compose" ]; then export DOCKER_CONFIG=$$plugin; fi; \
