@@ -32,7 +32,6 @@ class DescribeSettings(BaseModel):
     target_vertices: int = Field(default=DescribeParams.target_vertices, ge=0)
     smoothing: int = Field(default=DescribeParams.smoothing, ge=0)
     smoothing_weights: str = DescribeParams.smoothing_weights  # one of app.core.smoothing.WEIGHTS
-    smoothing_target: float = Field(default=DescribeParams.smoothing_target, ge=0.0, allow_inf_nan=False)
     time_range: Literal["spectrum", "weyl"] = DescribeParams.time_range  # type: ignore[assignment]
     laplacian: Literal["cotangent", "intrinsic"] = DescribeParams.laplacian  # type: ignore[assignment]
     remesh: bool = DescribeParams.remesh

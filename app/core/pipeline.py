@@ -50,10 +50,12 @@ class DescribeParams:
     # collection measured: cotangent weights do not even out a triangulation, uncapped areas lose on
     # rigid parts, uniform weights depend on the connectivity (docs/results.md)
     smoothing_weights: str = "capped-area"
-    # > 0: adaptive smoothing. A mesh that reaches the canonical resolution by decimation (a scan, a
-    # fine model) keeps its detail unless it is noisy: Taubin pairs only until its roughness
-    # (app.core.roughness) is at most this, `smoothing` steps at most. A subdivided mesh always gets
-    # `smoothing` steps: its flat facets are the pipeline's own. 0: `smoothing` steps for every mesh
+    # > 0: adaptive smoothing, an evaluation option (`shapebag evaluate --smoothing-target`), not a
+    # service setting: a mesh that reaches the canonical resolution by decimation gets Taubin pairs only
+    # until its roughness (app.core.roughness) is at most this, `smoothing` steps at most; a subdivided
+    # mesh always gets `smoothing` steps. It keeps clean scans' detail but leaves noisy queries
+    # unlike the clean collection they are matched against (docs/results.md, "Full-resolution
+    # columns"). 0: `smoothing` steps for every mesh
     smoothing_target: float = 0.0
     # intrinsic (cotangent weights of the intrinsic Delaunay triangulation: the same operator on a
     # Delaunay mesh, far less dependent on the triangulation elsewhere) | cotangent (the paper's)
