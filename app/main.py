@@ -13,15 +13,15 @@ from fastapi import FastAPI, Request
 from fastapi.middleware.cors import CORSMiddleware
 
 from app.api import errors
+from app.api.client_budget import ClientBudget
 from app.api.deps import Runtime
 from app.api.limits import GuardUploads, RefuseEncodedBodies, check_data_dir
 from app.api.routes import admin, docs, explain, health, jobs, labels, models, search, web
 from app.config import Settings
-from app.services import vocabularies
+from app.services import query_pool, vocabularies
 from app.services.context import ServiceContext, open_context
 from app.services.live_index import LiveIndex
 from app.services.metrics import Metrics
-from app.services.query_pool import QueryDescriber
 from app.services.sweep import sweep_temp_files
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
@@ -46,14 +46,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         await asyncio.to_thread(live.refresh)
         workers = WorkerPool(ctx.settings, ctx.settings.workers)
         workers.start()
-        describer = QueryDescriber(
-            settings.search_processes,
-            settings.describe.params(),
-            settings.max_vertices,
-            settings.describe_timeout_s,
-            settings.worker_memory_mb,
-            settings.search_queue,
-        )
+        describer = query_pool.from_settings(settings)
         await asyncio.to_thread(metrics.skip_history, ctx)
         if settings.warm_up:  # in the background: startup does not wait for it
             asyncio.get_running_loop().run_in_executor(None, describer.warm_up)
@@ -97,6 +90,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             time.perf_counter() - t
         )
         return response
+
+    tokens = {"api": settings.api_token, "admin": settings.admin_token}
+    # outermost: every layer inside sees the request's client, and its 429s are answered here
+    app.add_middleware(ClientBudget, max_requests=settings.client_requests, tokens=tokens)
 
     for module in (models, labels, jobs, search, admin, health, web, docs, explain):
         app.include_router(module.router)

@@ -45,7 +45,7 @@ async def thumbnail_file(ctx: ServiceContext, pool: QueryDescriber, model: Model
     if not path.is_file():
         mesh_path = str(ctx.blobs.mesh_path(model.sha256, model.file_type))
         args = (mesh_path, model.file_type, ctx.settings.max_vertices, size, model.id)
-        png = await pool.run(rendering.render_stored, args, "rendering the thumbnail")
+        png = await pool.run(rendering.render_stored, args, "rendering the thumbnail", kind="render")
         await asyncio.to_thread(atomic_write, path, png)
         if not await asyncio.to_thread(_exists, ctx, model.id):  # deleted while rendering: no orphan file
             path.unlink(missing_ok=True)

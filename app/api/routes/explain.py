@@ -38,7 +38,9 @@ async def _stored(runtime: Runtime, pair: ActivePair, model_id: int) -> explain.
     description = await run_in_threadpool(explain.stored_description, ctx, model)
     path = str(ctx.blobs.mesh_path(model.sha256, model.file_type))
     args = (path, model.file_type, ctx.settings.describe.params(), ctx.settings.max_vertices)
-    geometry = await runtime.describer.run(explain.stored_geometry, args, "reading the model's mesh")
+    geometry = await runtime.describer.run(
+        explain.stored_geometry, args, "reading the model's mesh", kind="explain"
+    )
     return explain.side(model, model.name, description, geometry, pair.vocabulary, pair.params)
 
 
@@ -73,7 +75,9 @@ async def explain_upload(request: Request, runtime: RuntimeDep) -> Explanation:
     pair = runtime.live.require()
     other = await _stored(runtime, pair, against)  # first: a wrong id fails before the costly part
     args = (data, limits.upload_format(filename), settings.describe.params(), settings.max_vertices)
-    description, geometry = await runtime.describer.run(explain.query_geometry, args, "explaining the query")
+    description, geometry = await runtime.describer.run(
+        explain.query_geometry, args, "explaining the query", kind="explain"
+    )
     shape = explain.side(None, filename, description, geometry, pair.vocabulary, pair.params)
     return to_response(explain.explain(pair.record.id, pair.vocabulary, shape, other))
 
