@@ -24,7 +24,7 @@ import logging
 import multiprocessing as mp
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable, Hashable
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -115,6 +115,7 @@ class QueryDescriber:
         self._running: dict[str, dict[str, int]] = {kind: {} for kind in KINDS}  # kind -> client -> n
         self._served: dict[str, dict[str, int]] = {kind: {} for kind in KINDS}  # kind -> client -> turn
         self._turn = 0
+        self._shared: dict[Hashable, asyncio.Future[Any]] = {}
 
     def _new_executor(self) -> ProcessPoolExecutor:
         return ProcessPoolExecutor(
@@ -173,6 +174,16 @@ class QueryDescriber:
             raise ResourceLimitError(
                 f"{what} needs more than the memory limit of {self.memory_mb} MB; send a smaller mesh"
             ) from None
+
+    async def shared(self, key: Hashable, make: Callable[[], Awaitable[Any]]) -> Any:
+        """Concurrent requests for the same work (`key`) share one run of make(); a caller that goes
+        away does not cancel it for the others."""
+        task = self._shared.get(key)
+        if task is None:
+            task = asyncio.ensure_future(make())
+            self._shared[key] = task
+            task.add_done_callback(lambda _: self._shared.pop(key, None))
+        return await asyncio.shield(task)
 
     # ---- admission ---------------------------------------------------------------------------------
 

@@ -19,7 +19,7 @@ from app.api.limits import IdPath
 from app.api.routes.models import ERRORS
 from app.api.schemas import Explanation, ShapeExplained, WordContribution
 from app.api.uploads import multipart_body, read_form
-from app.services import catalog, explain
+from app.services import catalog, explain, views
 from app.services.errors import InvalidInputError
 from app.services.live_index import ActivePair
 
@@ -36,11 +36,7 @@ async def _stored(runtime: Runtime, pair: ActivePair, model_id: int) -> explain.
     ctx = runtime.ctx
     model = await run_in_threadpool(catalog.get_model, ctx, model_id)
     description = await run_in_threadpool(explain.stored_description, ctx, model)
-    path = str(ctx.blobs.mesh_path(model.sha256, model.file_type))
-    args = (path, model.file_type, ctx.settings.describe.params(), ctx.settings.max_vertices)
-    geometry = await runtime.describer.run(
-        explain.stored_geometry, args, "reading the model's mesh", kind="explain"
-    )
+    geometry = await views.explain_geometry(ctx, runtime.describer, model)  # kept; computed once
     return explain.side(model, model.name, description, geometry, pair.vocabulary, pair.params)
 
 
