@@ -10,6 +10,7 @@ from pathlib import Path
 from app.core.mesh import Mesh, detect_format, load_mesh
 from app.core.pipeline import DescribeParams, ShapeDescription, canonical_mesh, describe_canonical
 from app.services import views
+from app.services.clients import current_client
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError, QueueFullError
 from app.services.metadata import check_metadata
@@ -68,7 +69,7 @@ def submit(
                 ctx.blobs.mesh_path(digest, file_type).unlink(missing_ok=True)
             ctx.blobs.ensure_mesh(data, digest, existing.file_type, conn)
             models_repo.set_queued(conn, existing.id)
-            job_id = jobs_repo.enqueue(conn, "ingest", model_id=existing.id)
+            job_id = jobs_repo.enqueue(conn, "ingest", model_id=existing.id, client=current_client())
             model = models_repo.get(conn, existing.id)
             assert model is not None
             return Submitted(model, job_id, False)
@@ -82,7 +83,7 @@ def submit(
             file_type=file_type,
             size_bytes=len(data),
         )
-        job_id = jobs_repo.enqueue(conn, "ingest", model_id=model_id)
+        job_id = jobs_repo.enqueue(conn, "ingest", model_id=model_id, client=current_client())
         model = models_repo.get(conn, model_id)
     assert model is not None
     return Submitted(model, job_id, True)
