@@ -91,7 +91,7 @@ class Settings(BaseSettings):
     explain_budget: BudgetSettings = Field(default_factory=lambda: BudgetSettings(queue=4, timeout_s=60.0))
     render_budget: BudgetSettings = Field(default_factory=lambda: BudgetSettings(timeout_s=20.0))
     client_requests: int = Field(default=8, ge=1)  # costly requests one client has in flight; more: 429
-    ingest_timeout_s: float = Field(default=300.0, gt=0)  # wall clock of one ingest job; then failed
+    ingest_timeout_s: float = Field(default=120.0, gt=0)  # wall clock of one ingest job; then failed
     worker_nice: int = Field(default=10, ge=0, le=19)  # ingestion yields the cores to searches
     worker_memory_mb: int = Field(default=4096, ge=0)  # RLIMIT_AS of worker and pool processes; 0: none
     upload_timeout_s: float = Field(default=30.0, gt=0)  # no body bytes for this long: 408

@@ -361,7 +361,8 @@ def main(argv: list[str] | None = None) -> int:
         if base is None:
             data_dir = Path(tmp) / "data"
             seed_data_dir(data_dir, files)
-            proc, base = serve(data_dir, args.workers)
+            # every client here connects from 127.0.0.1: one client to the server's per-client bound
+            proc, base = serve(data_dir, args.workers, {"SHAPEBAG_CLIENT_REQUESTS": str(2 * args.clients)})
             pid = proc.pid
         try:
             if not args.no_hostile:

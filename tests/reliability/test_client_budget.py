@@ -91,3 +91,30 @@ def test_past_its_requests_in_flight_a_client_gets_429_and_others_are_served():
         await normal.aclose()
 
     asyncio.run(scenario())
+
+
+def test_an_upload_records_its_client_on_the_ingest_job(settings, corpus):
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+    from app.storage import jobs as jobs_repo
+    from tests.conftest import make_settings
+
+    token = "t" * 40
+    app = create_app(make_settings(settings.data_dir, workers=0, api_token=token))
+    (first, _), (second, _) = corpus.files[0], corpus.files[1]
+    with TestClient(app) as client:
+        with_token = client.post(
+            "/models", files={"file": (first.name, first.read_bytes())}, headers={"X-API-Token": token}
+        )
+        assert with_token.status_code == 202, with_token.text
+        admin = client.post(
+            "/models",
+            files={"file": (second.name, second.read_bytes())},
+            headers={"Authorization": f"Bearer {settings.admin_token}"},
+        )
+        assert admin.status_code == 202, admin.text
+        ctx = app.state.runtime.ctx
+        with ctx.db.read() as conn:
+            jobs = [jobs_repo.get(conn, r.json()["job_id"]) for r in (with_token, admin)]
+    assert [j.client for j in jobs] == ["token:api", "token:admin"]  # type: ignore[union-attr]
