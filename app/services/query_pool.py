@@ -7,7 +7,8 @@ front of them (docs/reliability.md, "Budgets"):
 - `reserve` processes are kept for query descriptions: the other kinds together never take the last
   one, so an explain or a render, however slow, never makes a search wait for a process;
 - a deadline per request (`timeout_s`, waiting included): a process that overruns is killed and
-  replaced; requests in other processes never notice;
+  replaced (504), requests in other processes never notice; a request still waiting for a process at
+  its deadline is refused as busy (503), since that says nothing about the request;
 - per client (services/clients.py): a client waits for at most half of a kind's queue
   (ClientOverBudget: 429), and a freed process goes to the waiting client that runs the fewest of
   that kind, so one client's burst delays only itself;
@@ -176,8 +177,10 @@ class QueryDescriber:
             ) from None
 
     async def shared(self, key: Hashable, make: Callable[[], Awaitable[Any]]) -> Any:
-        """Concurrent requests for the same work (`key`) share one run of make(); a caller that goes
-        away does not cancel it for the others."""
+        """Concurrent requests of one client for the same work (`key`) share one run of make(); a caller
+        that goes away does not cancel it for the others. Per client, so that one client's refusal
+        (over its share, 429) is never another's answer."""
+        key = (current_client(), key)
         task = self._shared.get(key)
         if task is None:
             task = asyncio.ensure_future(make())
@@ -207,9 +210,9 @@ class QueryDescriber:
         queue.append(waiter)
         try:
             return await asyncio.wait_for(asyncio.shield(waiter.future), limit)
-        except TimeoutError:
+        except TimeoutError:  # busy, not the request's fault: a 503 to retry, never kept as its failure
             self._abandon(kind, waiter)
-            raise DescribeTimeoutError(f"{what}: no process was free within {limit:g} s; retry") from None
+            raise PoolBusyError(f"{what}: no process was free within {limit:g} s; retry shortly") from None
         except asyncio.CancelledError:  # the client went away while waiting
             self._abandon(kind, waiter)
             raise

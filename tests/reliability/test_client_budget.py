@@ -35,10 +35,22 @@ def test_a_client_is_its_valid_token_else_its_address():
 
 
 def test_costly_requests_are_the_pool_and_upload_ones():
-    costly = [("POST", "/search"), ("POST", "/models"), ("POST", "/explain"), ("POST", "/web/preview.png"),
-              ("GET", "/models/3/explain"), ("GET", "/models/3/thumbnail.png")]
-    cheap = [("GET", "/models"), ("GET", "/models/3"), ("GET", "/healthz"), ("DELETE", "/models/3"),
-             ("GET", "/search"), ("GET", "/models/3/mesh")]
+    costly = [
+        ("POST", "/search"),
+        ("POST", "/models"),
+        ("POST", "/explain"),
+        ("POST", "/web/preview.png"),
+        ("GET", "/models/3/explain"),
+        ("GET", "/models/3/thumbnail.png"),
+    ]
+    cheap = [
+        ("GET", "/models"),
+        ("GET", "/models/3"),
+        ("GET", "/healthz"),
+        ("DELETE", "/models/3"),
+        ("GET", "/search"),
+        ("GET", "/models/3/mesh"),
+    ]
     assert all(is_costly({"method": m, "path": p}) for m, p in costly)
     assert not any(is_costly({"method": m, "path": p}) for m, p in cheap)
 
@@ -68,8 +80,12 @@ def test_past_its_requests_in_flight_a_client_gets_429_and_others_are_served():
     async def scenario():
         gate, seen = asyncio.Event(), []
         app = _app(gate, seen)
-        flooder = httpx.AsyncClient(transport=httpx.ASGITransport(app, client=("10.0.0.1", 1)), base_url="http://t")
-        normal = httpx.AsyncClient(transport=httpx.ASGITransport(app, client=("10.0.0.2", 1)), base_url="http://t")
+        flooder = httpx.AsyncClient(
+            transport=httpx.ASGITransport(app, client=("10.0.0.1", 1)), base_url="http://t"
+        )
+        normal = httpx.AsyncClient(
+            transport=httpx.ASGITransport(app, client=("10.0.0.2", 1)), base_url="http://t"
+        )
         held = [asyncio.ensure_future(flooder.post("/search", content=b"x")) for _ in range(2)]
         while len(seen) < 2:
             await asyncio.sleep(0.01)

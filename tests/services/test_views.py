@@ -19,6 +19,7 @@ from app.core.mesh import load_mesh
 from app.core.pipeline import canonical_mesh
 from app.main import create_app
 from app.services import catalog, ingestion, views
+from app.services.errors import PoolBusyError
 from app.services.explain import from_canonical
 from app.services.thumbnails import RenderTooCostlyError, render_rgba
 from tests.conftest import make_settings, wait_for
@@ -162,3 +163,21 @@ def test_a_needle_renders_and_slivers_across_the_frame_are_refused_before_the_wo
         render_rgba(v, f, 256)
     cube = trimesh.creation.box()  # a few frame-sized triangles are well inside the budget
     assert render_rgba(cube.vertices, cube.faces, 512)[..., 3].max() == 255
+
+
+def test_a_busy_pool_is_not_kept_as_the_models_failure(served, monkeypatch):
+    client, data = served
+    model = _ready(client, 4)
+    pool = client.app.state.runtime.describer
+    real = pool.run
+
+    async def busy(*args, **kwargs):
+        raise PoolBusyError("rendering the thumbnail: no process was free within 20 s; retry shortly")
+
+    monkeypatch.setattr(pool, "run", busy)
+    r = client.get(f"/models/{model['id']}/thumbnail.png", params={"size": 128})
+    assert r.status_code == 503 and "retry-after" in r.headers
+    assert not list((data / "views").glob(f"{model['id']}.*.failed"))
+    monkeypatch.setattr(pool, "run", real)
+    again = client.get(f"/models/{model['id']}/thumbnail.png", params={"size": 128})
+    assert again.status_code == 200 and views.PLACEHOLDER_HEADER not in again.headers
