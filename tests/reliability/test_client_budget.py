@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 
 import httpx
+import pytest
 from fastapi import FastAPI
 
 from app.api.client_budget import ClientBudget, client_key, is_costly
@@ -134,3 +135,39 @@ def test_an_upload_records_its_client_on_the_ingest_job(settings, corpus):
         with ctx.db.read() as conn:
             jobs = [jobs_repo.get(conn, r.json()["job_id"]) for r in (with_token, admin)]
     assert [j.client for j in jobs] == ["token:api", "token:admin"]  # type: ignore[union-attr]
+
+
+@pytest.mark.slow
+def test_a_real_server_answers_a_client_over_its_queue_share_with_429(data_dir, corpus, tmp_path):
+    """Through every middleware of the real app: one process, a queue of 2 (a client may hold 1 of it),
+    slow describes; four searches at once from one address: 1 runs, 1 waits, 2 are 429."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from tests.reliability.helpers import MULTIPART_HEADERS, multipart, start_server
+
+    server, base = start_server(
+        data_dir,
+        tmp_path / "s.log",
+        SHAPEBAG_WORKERS="0",
+        SHAPEBAG_POOL_PROCESSES="1",
+        SHAPEBAG_SEARCH_PROCESSES="1",
+        SHAPEBAG_SEARCH_QUEUE="2",
+        SHAPEBAG_DESCRIBE__K="200",
+        SHAPEBAG_DESCRIBE__TARGET_VERTICES="6000",  # a solve of seconds: the four overlap
+    )
+    path, _ = corpus.held_out[0]
+    body = multipart(path.name, path.read_bytes())
+    try:
+        with httpx.Client(base_url=base, timeout=120) as http, ThreadPoolExecutor(4) as pool:
+            answers = list(
+                pool.map(
+                    lambda _: http.post("/search", content=body, headers=MULTIPART_HEADERS), range(4)
+                )
+            )
+    finally:
+        server.stop()
+    codes = sorted(r.status_code for r in answers)
+    refused = [r for r in answers if r.status_code == 429]
+    assert codes == [200, 200, 429, 429], [r.text[:200] for r in answers]
+    assert all(r.json()["error"]["code"] == "too_many_requests" and r.headers["retry-after"] for r in refused)
+    assert all("already wait" in r.json()["error"]["message"] for r in refused)
