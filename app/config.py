@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ipaddress
 import os
 from importlib import resources
 from pathlib import Path
@@ -16,6 +17,8 @@ from app.core.smoothing import WEIGHTS
 from app.core.vocabulary import EncodeParams
 
 DEFAULT_ADMIN_TOKEN = "change-me"
+MIN_TOKEN_CHARS = 32  # e.g. python3 -c 'import secrets; print(secrets.token_urlsafe(24))'
+LOOPBACK_NAMES = ("localhost",)
 # package data ([tool.setuptools.package-data]): one path for editable, wheel and container installs
 SHIPPED_VOCABULARY = Path(str(resources.files("app") / "data" / "vocabulary" / "default"))
 
@@ -28,6 +31,8 @@ class DescribeSettings(BaseModel):
     target_vertices: int = Field(default=DescribeParams.target_vertices, ge=0)
     smoothing: int = Field(default=DescribeParams.smoothing, ge=0)
     smoothing_weights: str = DescribeParams.smoothing_weights  # one of app.core.smoothing.WEIGHTS
+    smoothing_target: float = Field(default=DescribeParams.smoothing_target, ge=0.0, allow_inf_nan=False)
+    smoothing_max: int = Field(default=DescribeParams.smoothing_max, ge=0)
     time_range: Literal["spectrum", "weyl"] = DescribeParams.time_range  # type: ignore[assignment]
     laplacian: Literal["cotangent", "intrinsic"] = DescribeParams.laplacian  # type: ignore[assignment]
     remesh: bool = DescribeParams.remesh
@@ -74,6 +79,15 @@ class BudgetSettings(BaseModel):
     timeout_s: float = Field(default=30.0, gt=0)  # deadline, waiting included: 504, process replaced
 
 
+class StorageSettings(BaseModel):
+    """Room on the data directory (SHAPEBAG_STORAGE__MIN_FREE_MB=1024 ...): under the floor, or past the
+    quota, writes answer 507 before the disk (and SQLite) fills; reads and DELETE keep working."""
+
+    min_free_mb: int = Field(default=512, ge=0)  # free space the filesystem keeps; 0: no floor
+    quota_mb: int = Field(default=0, ge=0)  # bytes under data_dir (meshes, descriptions, database); 0: none
+    measure_interval_s: float = Field(default=10.0, ge=0)  # how stale the quota's count of bytes may be
+
+
 class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="SHAPEBAG_", env_nested_delimiter="__", extra="ignore")
 
@@ -117,6 +131,7 @@ class Settings(BaseSettings):
     default_vocabulary: Path | None = SHIPPED_VOCABULARY
     describe: DescribeSettings = Field(default_factory=DescribeSettings)
     encode: EncodeSettings = Field(default_factory=EncodeSettings)
+    storage: StorageSettings = Field(default_factory=StorageSettings)
 
     @field_validator("default_vocabulary", mode="before")
     @classmethod
@@ -124,8 +139,36 @@ class Settings(BaseSettings):
         return None if value == "" else value  # SHAPEBAG_DEFAULT_VOCABULARY= disables the shipped one
 
     def check_secure(self) -> None:
-        """Refuse to start with the default admin token outside dev mode."""
+        """Refuse to start with a guessable token or an open dev mode on the network.
+
+        Outside dev mode the admin token must be set, not the default, and long; a set API token must be
+        long; dev mode (the default admin token allowed) only binds a loopback address."""
         if not self.dev_mode and (not self.admin_token or self.admin_token == DEFAULT_ADMIN_TOKEN):
             raise ValueError(
                 "SHAPEBAG_ADMIN_TOKEN is unset or the default: set a secret token, or SHAPEBAG_DEV_MODE=1"
             )
+        tokens = {"SHAPEBAG_API_TOKEN": self.api_token}
+        if self.admin_token != DEFAULT_ADMIN_TOKEN:
+            tokens["SHAPEBAG_ADMIN_TOKEN"] = self.admin_token
+        for name, token in tokens.items():
+            if token and len(token) < MIN_TOKEN_CHARS:
+                raise ValueError(
+                    f"{name} is {len(token)} characters long: use at least {MIN_TOKEN_CHARS} (for example"
+                    " python3 -c 'import secrets; print(secrets.token_urlsafe(24))')"
+                )
+        if self.dev_mode and not is_loopback(self.host):
+            raise ValueError(
+                f"SHAPEBAG_DEV_MODE allows the default admin token, so it only serves a loopback address"
+                f" (127.0.0.1, ::1, localhost), not {self.host!r}: set SHAPEBAG_ADMIN_TOKEN and turn dev"
+                " mode off to serve the network"
+            )
+
+
+def is_loopback(host: str) -> bool:
+    """127.0.0.0/8, ::1 or localhost; False for 0.0.0.0, '' (every address) and any other name."""
+    if host.lower() in LOOPBACK_NAMES:
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False

@@ -17,6 +17,7 @@ from app.api.client_budget import ClientBudget
 from app.api.deps import Runtime
 from app.api.limits import GuardUploads, RefuseEncodedBodies, check_data_dir
 from app.api.routes import admin, docs, explain, health, jobs, labels, models, search, web
+from app.api.security import SecureEdge, document_refusals
 from app.config import Settings
 from app.services import query_pool, vocabularies
 from app.services.context import ServiceContext, open_context
@@ -77,8 +78,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(  # 503 past N bodies being read at once, 408 after a stall
         GuardUploads, max_concurrent=settings.max_concurrent_uploads, timeout_s=settings.upload_timeout_s
     )
+    # outside the body guards (a refused client takes no upload slot), inside the edge (its 429s get the
+    # security headers): names each request's client for the layers inside, answers its 429s
+    tokens = {"api": settings.api_token, "admin": settings.admin_token}
+    app.add_middleware(ClientBudget, max_requests=settings.client_requests, tokens=tokens)
     if settings.cors_origins:  # closed unless configured
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "POST"])
+    # outside the others: its headers go on their refusals too, and a foreign Origin is refused first
+    app.add_middleware(SecureEdge, allowed_origins=settings.cors_origins)
 
     @app.middleware("http")
     async def observe_latency(request: Request, call_next):
@@ -91,12 +98,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         )
         return response
 
-    tokens = {"api": settings.api_token, "admin": settings.admin_token}
-    # outermost: every layer inside sees the request's client, and its 429s are answered here
-    app.add_middleware(ClientBudget, max_requests=settings.client_requests, tokens=tokens)
-
     for module in (models, labels, jobs, search, admin, health, web, docs, explain):
         app.include_router(module.router)
+    generate = app.openapi
+
+    def openapi() -> dict:
+        if app.openapi_schema is None:
+            app.openapi_schema = document_refusals(generate())
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
     return app
 
 

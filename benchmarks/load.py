@@ -317,7 +317,7 @@ def serve(data_dir: Path, workers: int, extra: dict[str, str] | None = None) -> 
         os.environ,
         **FAST_ENV,
         SHAPEBAG_DATA_DIR=str(data_dir),
-        SHAPEBAG_ADMIN_TOKEN="load-test",
+        SHAPEBAG_ADMIN_TOKEN="load-test-kkkkkkkkkkkkkkkkkkkkkk",
         SHAPEBAG_WORKERS=str(workers),
         **(extra or {}),
     )

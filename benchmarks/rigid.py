@@ -3,7 +3,7 @@
     python -m benchmarks.rigid OUT [--classes 10] [--per-class 12] [--seed 0]
 
 Every other column is organic: SHREC'11's animals and humans, the synthetic body plans, the scan-like
-shapes made from them. Issue 11's held-out "mixed benchmark" has rigid classes too, and a user's
+shapes made from them. A held-out "mixed benchmark" has rigid classes too, and a user's
 collection may be parts, furniture and tools. Here each class is a constructive solid (manifold3d
 booleans of boxes, cylinders, tori, revolved profiles and extruded outlines: a watertight union, as a
 CAD export is), an instance draws its own proportions (±20 % per dimension, some classes a discrete

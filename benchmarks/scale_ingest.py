@@ -106,7 +106,7 @@ def search_latency(
         "SHAPEBAG_DATABASE_URL": url,
         "SHAPEBAG_BLOB_BACKEND": "database" if url else "filesystem",
         "SHAPEBAG_SEARCH_PROCESSES": "1",
-        "SHAPEBAG_ADMIN_TOKEN": "bench-token",
+        "SHAPEBAG_ADMIN_TOKEN": "bench-token-kkkkkkkkkkkkkkkkkkkk",
         "SHAPEBAG_LOG_LEVEL": "WARNING",
     }
     cmd = [

@@ -13,7 +13,7 @@ instances), extracted on a grid fine enough for 13k-46k vertices, then
 - sensor noise: displacement along the vertex normal, σ = 0.1 % of the diagonal;
 - a random resolution: quadric-decimated to 4k-40k vertices (log-uniform; a coarser extraction is
   kept as it is).
-So the pipeline's decimation does the 4x-40x reduction that issue 11's held-out scans needed, on open
+So the pipeline's decimation does the 4x-40x reduction that held-out scans need, on open
 surfaces. `--holes 0,0 --noise 0` gives the closed, clean surfaces at the same resolutions: the figure
 the holes and the noise are measured against. Write OUT outside the repository (var/ is ignored); the
 meshes are never committed.

@@ -14,8 +14,8 @@ NN = the copy's nearest original is its own; MRR = mean reciprocal rank of its o
 among the first five. Pure BoF is reported beside the fused vector. Each file's copies come from its
 own random stream (seed, file name), so a run is reproducible and another setting sees the same copies.
 The figures are low by nature: the corpus holds several copies of the same box, and low-poly CAD
-reaches 1,000 vertices by subdivision as an original and by decimation as a copy (docs/results.md,
-round 7). Writes results/<name>.json.
+reaches 1,000 vertices by subdivision as an original and by decimation as a copy (docs/results.md).
+Writes results/<name>.json.
 """
 
 from __future__ import annotations

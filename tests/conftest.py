@@ -64,7 +64,7 @@ def make_settings(data_dir: Path, **overrides) -> Settings:
     base = dict(
         data_dir=data_dir,
         dev_mode=True,
-        admin_token="test-token",
+        admin_token="test-token-kkkkkkkkkkkkkkkkkkkkk",
         workers=1,
         search_processes=1,
         describe=DescribeSettings(k=40, m=20, target_vertices=TEST_VERTICES),

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import errno
 import logging
+import sqlite3
+from collections.abc import Mapping
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
+from app.api.security import HEADERS as SECURITY_HEADERS
 from app.core.mesh import InvalidMeshError, UnsupportedFormatError
 from app.services import errors as e
 
@@ -24,6 +28,7 @@ STATUS: dict[type[e.ServiceError], int] = {
     e.ConflictError: 409,
     e.DescribeTimeoutError: 504,
     e.DescribeCrashedError: 503,
+    e.InsufficientStorageError: 507,
 }
 RETRY_AFTER_S = 5
 HTTP_CODES = {401: "unauthorized", 404: "not_found", 405: "method_not_allowed", 413: "payload_too_large"}
@@ -36,8 +41,22 @@ class AdminAuthError(e.ServiceError):
 STATUS[AdminAuthError] = 401
 
 
-def error_response(status: int, code: str, message: str, headers: dict | None = None) -> JSONResponse:
+def error_response(
+    status: int, code: str, message: str, headers: Mapping[str, str] | None = None
+) -> JSONResponse:
     return JSONResponse({"error": {"code": code, "message": message}}, status_code=status, headers=headers)
+
+
+def _allowed_methods(request: Request) -> str:
+    """Every method some route serves at this path: Starlette's own Allow names the first matching
+    route's methods only (POST for /models, which GET serves too)."""
+    routes = request.app.router.routes
+    allowed = [
+        m
+        for m in ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE")
+        if any(r.matches({**request.scope, "method": m})[0] == Match.FULL for r in routes)
+    ]
+    return ", ".join(allowed)
 
 
 def install(app: FastAPI) -> None:
@@ -69,7 +88,10 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         code = HTTP_CODES.get(exc.status_code, "http_error")
-        return error_response(exc.status_code, code, str(exc.detail))
+        headers = dict(exc.headers or {})
+        if exc.status_code == 405:
+            headers["Allow"] = _allowed_methods(request)
+        return error_response(exc.status_code, code, str(exc.detail), headers)
 
     @app.exception_handler(OSError)
     async def _storage(request: Request, exc: OSError) -> JSONResponse:
@@ -85,7 +107,27 @@ def install(app: FastAPI) -> None:
         log.exception("unhandled OS error")
         return error_response(500, "internal_error", "internal error; see the server log")
 
+    try:  # the PostgreSQL backend (an optional extra): its "disk full", SQLSTATE 53100
+        from psycopg.errors import DiskFull
+
+        @app.exception_handler(DiskFull)
+        async def _postgres_full(request: Request, exc: Exception) -> JSONResponse:
+            log.error("database storage error on %s %s: %s", request.method, request.url.path, exc)
+            return error_response(507, "insufficient_storage", "the server's disk is full; nothing was saved")
+    except ImportError:
+        pass
+
+    @app.exception_handler(sqlite3.OperationalError)
+    async def _database(request: Request, exc: sqlite3.OperationalError) -> JSONResponse:
+        """SQLite's "database or disk is full" (SQLITE_FULL) is no OSError: the same 507 as ENOSPC."""
+        if "disk is full" in str(exc):
+            log.error("database storage error on %s %s: %s", request.method, request.url.path, exc)
+            return error_response(507, "insufficient_storage", "the server's disk is full; nothing was saved")
+        log.exception("unhandled database error on %s %s", request.method, request.url.path)
+        return error_response(500, "internal_error", "internal error; see the server log", SECURITY_HEADERS)
+
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
         log.exception("unhandled error on %s %s", request.method, request.url.path)
-        return error_response(500, "internal_error", "internal error; see the server log")
+        # answered outside the middleware stack (Starlette's ServerErrorMiddleware): headers set here
+        return error_response(500, "internal_error", "internal error; see the server log", SECURITY_HEADERS)

@@ -47,6 +47,11 @@ class ModelPublic(BaseModel):
     metadata: dict[str, Any]
     created_at: str
     updated_at: str
+    stored_bytes: int | None = Field(
+        None,
+        description="bytes the model holds in the data directory: its mesh file, description and cached"
+        " thumbnails (GET /models/{id} only; a mesh shared by identical uploads counts for each)",
+    )
 
     @classmethod
     def of(cls, m: ModelRecord) -> ModelPublic:

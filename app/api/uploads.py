@@ -98,7 +98,22 @@ async def read_form(request: Request, max_bytes: int) -> UploadForm:
 
 
 def _too_large(max_bytes: int) -> PayloadTooLargeError:
-    return PayloadTooLargeError(f"the upload is larger than the limit of {max_bytes / 1e6:g} MB")
+    limit = human_size(max_bytes)
+    exact = "" if limit.endswith(" bytes") else f" ({max_bytes} bytes)"
+    return PayloadTooLargeError(f"the upload is larger than the limit of {limit}{exact}")
+
+
+def human_size(n: int) -> str:
+    """Bytes in binary units, as the settings are written (50 * 1024 * 1024 -> '50 MiB'): at most one
+    decimal, trailing zeros dropped; below 1 KiB, in bytes."""
+    value, unit = float(n), "bytes"
+    for bigger in ("KiB", "MiB", "GiB", "TiB"):
+        if round(value, 1) < 1024:  # compare what is printed: 1023.96 KiB reads as 1 MiB, not 1024 KiB
+            break
+        value, unit = value / 1024, bigger
+    if unit == "bytes":
+        return "1 byte" if n == 1 else f"{n} bytes"
+    return f"{value:.1f}".rstrip("0").rstrip(".") + f" {unit}"
 
 
 def multipart_body(file_description: str, **fields: dict) -> dict:

@@ -30,7 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from app.commands.ingest import ingest_folder
-    from app.commands.serve import serve
+    from app.commands.serve import check_port_free, serve
     from app.datasets.synthetic import generate
 
     # the demo is a local playground: dev mode unless the environment says otherwise
@@ -38,6 +38,8 @@ def run(args: argparse.Namespace) -> int:
     settings = settings_from(
         args, default_data_dir=DEMO_DATA_DIR, use_env=False, host=args.host, port=args.port, dev_mode=dev
     )
+    if not args.no_serve:  # before generating and ingesting, not after
+        check_port_free(settings.host, settings.port)
     corpus = settings.data_dir / "corpus"
     print(f"the demo's own data directory: {settings.data_dir} (start clean: delete it, or make clean-demo)")
     if not (corpus / "labels.csv").is_file():

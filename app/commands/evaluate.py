@@ -12,6 +12,7 @@ from app.core.smoothing import WEIGHTS
 from app.core.vocabulary import EncodeParams
 from app.services.evaluation import (
     DEFAULT_CACHE,
+    DEFAULT_ROWS,
     ROW_NAMES,
     SUBDIVISIONS,
     EvaluationError,
@@ -30,8 +31,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "against their clean line.",
     )
     p.add_argument("directory", type=Path, help="folder holding labels.csv (file,class[,split])")
-    p.add_argument("--runs", default=",".join(ROW_NAMES),
-                   help=f"comma-separated rows (default: all): {', '.join(ROW_NAMES)}")
+    p.add_argument("--runs", default=",".join(DEFAULT_ROWS),
+                   help=f"comma-separated rows, or 'all': {', '.join(ROW_NAMES)} (default: all but paper, "
+                   "which solves run5 at each mesh's own resolution as the paper did: tens of seconds per "
+                   "mesh of 50k vertices)")
     p.add_argument("--vocabulary-size", type=int, default=64, help="words per vocabulary (default 64)")
     p.add_argument("--mode", choices=("hard", "soft"), default=EncodeParams.mode,
                    help=f"vector quantisation: hard (eq. 6) or soft (eq. 5; default {EncodeParams.mode})")
@@ -62,6 +65,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--smoothing", type=int, default=EvaluationOptions.smoothing,
                    help="Taubin steps before the eigen-solve, λ and μ alternating (0: none; "
                    "default %(default)s)")
+    p.add_argument("--smoothing-target", type=float, default=EvaluationOptions.smoothing_target,
+                   metavar="R", help="adaptive smoothing: Taubin pairs until the roughness is at most R, "
+                   "--smoothing-max steps at most, after --smoothing steps for a subdivided mesh "
+                   "(0: exactly --smoothing steps for every mesh)")
+    p.add_argument("--smoothing-max", type=int, default=EvaluationOptions.smoothing_max, metavar="N",
+                   help="adaptive smoothing's most Taubin steps")
     p.add_argument("--smoothing-weights", choices=WEIGHTS, default=EvaluationOptions.smoothing_weights,
                    help="Taubin weights: intrinsic (intrinsic Delaunay cotangent), cotangent (extrinsic, "
                    "clipped at 0), area (faces on each edge), capped-area (the same, each face at most the "
@@ -101,6 +110,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     rows = tuple(r.strip() for r in args.runs.split(",") if r.strip())
+    rows = ROW_NAMES if rows == ("all",) else rows
     if not rows:
         raise CommandError("--runs names no row")
     if args.vocabulary_size < 2:
@@ -130,7 +140,8 @@ def run(args: argparse.Namespace) -> int:
         k=args.k,
         time_range=args.time_range,
         smoothing=args.smoothing,
-        smoothing_weights=args.smoothing_weights,
+        smoothing_weights=args.smoothing_weights, smoothing_target=args.smoothing_target,
+        smoothing_max=args.smoothing_max,
         fill_holes=args.fill_holes,
         laplacian=args.laplacian,
         remesh=args.remesh,

@@ -1,4 +1,4 @@
-"""`shapebag ingest DIR`: bulk-ingest a labelled folder (labels.csv), resumable, with a progress bar."""
+"""`shapebag ingest DIR`: bulk-ingest a folder of meshes (labelled by its labels.csv, if any), resumable."""
 
 from __future__ import annotations
 
@@ -12,9 +12,11 @@ from app.commands._common import add_data_dir, settings_from, setup_logging
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "ingest", help="ingest every mesh of a labelled folder (labels.csv: file,class)"
+        "ingest", help="ingest every mesh of a folder (labels from its labels.csv: file,class, if any)"
     )
-    p.add_argument("directory", type=Path, help="folder holding labels.csv and the meshes")
+    p.add_argument("directory", type=Path,
+                   help="folder of meshes; with a labels.csv (file,class) only the files it lists, labelled "
+                   "where the class is filled in; without one, every mesh file under it, unlabelled")
     add_data_dir(p)
     p.add_argument("--processes", type=int, default=None, help="local worker processes (default: cores)")
     p.add_argument("--no-wait", action="store_true", help="only queue the jobs (a server's workers run them)")
@@ -32,18 +34,23 @@ def run(args: argparse.Namespace) -> int:
 
 def ingest_folder(settings, directory: Path, processes: int, wait: bool = True) -> dict:
     """Queue the folder, run local workers until its jobs finish, fit a first vocabulary if none."""
-    from app.datasets.folder import DatasetError, read_labelled_folder
+    from app.datasets.folder import DatasetError, read_mesh_folder
     from app.progress import progress
     from app.services import bulk, vocabularies
     from app.services.context import open_context
     from app.worker.processes import WorkerPool
 
-    ctx = open_context(settings)
-    vocabularies.ensure_default(ctx)  # as the server does: the shipped vocabulary, not a fit on this folder
     try:
-        total = len(read_labelled_folder(directory))
+        items = read_mesh_folder(directory)
     except DatasetError as exc:
         raise CommandError(str(exc)) from exc
+    total = len(items)
+    unlabelled = sum(item.label is None for item in items)
+    if unlabelled:
+        print(f"{unlabelled} of {total} meshes have no label"
+              + ("" if (Path(directory) / "labels.csv").is_file() else " (no labels.csv)"))
+    ctx = open_context(settings)
+    vocabularies.ensure_default(ctx)  # as the server does: the shipped vocabulary, not a fit on this folder
     with progress(total=total, desc="queue", unit="mesh") as bar:
         report = bulk.submit_folder(ctx, directory, on_file=lambda: bar.update(1))
     for path, reason in report.rejected:

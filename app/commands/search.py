@@ -7,11 +7,12 @@ from pathlib import Path
 
 from app.cli import CommandError
 from app.commands._common import add_data_dir, settings_from
+from app.core.formats import SUPPORTED_FORMATS
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("search", help="rank stored models by L1 distance to a query mesh")
-    p.add_argument("file", type=Path, help="query mesh (obj, off, ply, stl, glb)")
+    p.add_argument("file", type=Path, help=f"query mesh ({', '.join(SUPPORTED_FORMATS)})")
     add_data_dir(p)
     p.add_argument("-k", type=int, default=10, help="how many results (default 10)")
     p.add_argument("--label", default=None, help="only models with this label")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import socket
 
 from app.cli import CommandError
 from app.commands._common import add_data_dir, settings_from, setup_logging
@@ -51,12 +52,29 @@ def run(args: argparse.Namespace) -> int:
     return serve(settings, processes=args.processes)
 
 
+def check_port_free(host: str, port: int) -> None:
+    """Refuse a port that is taken now, before the seconds of start-up: uvicorn binds only after the
+    lifespan has opened storage, loaded the index and started workers. Bound as uvicorn binds
+    (SO_REUSEADDR), so a port left in TIME_WAIT by a previous run is not reported as taken."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((host, port))
+        except OSError as exc:
+            raise CommandError(
+                f"cannot listen on {host}:{port}: {exc.strerror or exc} (another server there? "
+                "stop it, or choose another port with --port or SHAPEBAG_PORT)"
+            ) from exc
+
+
 def serve(settings, processes: int = 1) -> int:
     import uvicorn
 
     from app.config import DEFAULT_ADMIN_TOKEN
     from app.main import create_app
 
+    check_port_free(settings.host, settings.port)
     setup_logging(verbose=True)
     try:
         app = create_app(settings)

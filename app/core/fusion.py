@@ -24,7 +24,8 @@ import numpy as np
 from app.core.baselines import SHAPE_DNA_COUNT, shape_dna
 from app.core.pipeline import ShapeDescription
 
-DEFAULT_WEIGHT = 1.0  # w: BoF + 1.0 × DNA, each over its median (issue 11's held-out measurements)
+# w: BoF + 1.0 × DNA, each over its median; fused, every collection measured did better (docs/results.md)
+DEFAULT_WEIGHT = 1.0
 MAX_PAIRS = 200_000  # above this many pairs, fit_scales draws this many (seeded) instead of all
 
 

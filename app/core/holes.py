@@ -73,8 +73,8 @@ def fill_holes(mesh: Mesh, max_area_fraction: float) -> tuple[Mesh, int]:
     mesh's mean face area): a slit, a puncture where decimation collapsed a face to a point and cleaning
     removed it (its three vertices ~1e-8 apart), or a non-convex rim whose centroid falls on the line of
     one of its edges. Such a triangle gives a vertex (almost) without area, which the mass matrix cannot
-    take, or a cotangent weight of ~1e307. Welding punctures shut instead was measured and cost 0.23
-    points of pure BoF on SHREC'11's triangulation variant (docs/results.md, round 8).
+    take, or a cotangent weight of ~1e307. Welding punctures shut instead was measured and retrieved
+    worse across triangulations (docs/results.md).
     max_area_fraction <= 0 returns the mesh unchanged. vertices (n, 3) -> (n + closed, 3).
     """
     if max_area_fraction <= 0:

@@ -18,12 +18,14 @@ from app.core.holes import fill_holes
 from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import LAPLACIANS, laplacian
 from app.core.mesh import InvalidMeshError, Mesh
+from app.core.packing import pack_float32, unpack_float32
 from app.core.remeshing import isotropic_remesh
 from app.core.resolution import SUBDIVISIONS, normalize_scale, to_resolution
+from app.core.roughness import smooth_until
 from app.core.smoothing import WEIGHTS, taubin
 from app.core.spectrum import SpectrumError, smallest_eigenpairs
 
-DESCRIPTION_FORMAT = 1
+DESCRIPTION_FORMAT = 2  # 2: the HKS table packed (app/core/packing.py); 1 still loads
 
 
 @dataclass(frozen=True)
@@ -33,34 +35,36 @@ class DescribeParams:
     k: int = 300  # eigenpairs
     m: int = 100  # time scales
     # t_min from the computed λ_k (the paper's). "weyl" (λ_k ≈ 4πk) is the same for every triangulation
-    # and wins without smoothing, but loses 8 points on the triangulation variant once the mesh is
-    # smoothed (docs/results.md)
+    # and helps unsmoothed meshes, but once the mesh is smoothed it retrieves worse across
+    # triangulations (docs/results.md)
     time_range: str = "spectrum"
     target_vertices: int = 1000  # canonical resolution; 0 keeps the input resolution
-    # Taubin steps (λ, μ, λ ...: 12 = 6 pairs) at the canonical resolution; 0 = none. With capped-area
-    # weights, 12 steps hold the old defaults' noise figure (98.6 fused, served and self-fit) where
-    # uniform Taubin 10 lost 0.4, and tie it on SHREC'11, its triangulation variant, rigid, scan-like
-    # and synthetic shapes (docs/results.md, round 14); past 12 the triangulation variant pays for the
-    # noise, and 40 uniform steps (the old default) cost 6-8 points on decimated scans
+    # Taubin steps (λ, μ, λ ...: 12 = 6 pairs) at the canonical resolution; 0 = none. Enough to absorb
+    # vertex noise without losing on any other collection; more smoothing helps noisy queries but costs
+    # on other triangulations and decimated scans (docs/results.md)
     smoothing: int = 12
     # capped-area (the default), area, intrinsic, cotangent or uniform Taubin weights
     # (app.core.smoothing). capped-area: each neighbour by the area of the faces on its edge, each face
     # counted at most as the mesh's median face: intrinsic (face areas), so a crowded side does not pull,
-    # and a CAD part's few large faces do not drag their vertices. The surface's cotangent weights do
-    # not even out a triangulation at all: intrinsic weights lose 5.0 fused on SHREC'11's triangulation
-    # variant and 6.0 on noisy synthetic shapes (round 10); plain area weights lose 2.7 on the rigid
-    # column (round 12); uniform weights (the default until round 14) depend on the connectivity
+    # and a CAD part's few large faces do not drag their vertices. It is the weighting that held on every
+    # collection measured: cotangent weights do not even out a triangulation, uncapped areas lose on
+    # rigid parts, uniform weights depend on the connectivity (docs/results.md)
     smoothing_weights: str = "capped-area"
+    # > 0: smoothing is adaptive: Taubin pairs until the canonical mesh's roughness (app.core.roughness)
+    # is at most this, `smoothing` steps at most; 0: exactly `smoothing` steps
+    smoothing_target: float = 0.0
+    smoothing_max: int = 40  # adaptive smoothing's most steps
     # intrinsic (cotangent weights of the intrinsic Delaunay triangulation: the same operator on a
     # Delaunay mesh, far less dependent on the triangulation elsewhere) | cotangent (the paper's)
     laplacian: str = "intrinsic"
     # isotropic remeshing at the canonical resolution (app.core.remeshing): triangulation-proof, but it
-    # spends vertices on the area that noise adds (noise variant: -23 points); an option
+    # spends vertices on the area that noise adds, so noisy queries retrieve far worse; an option
     remesh: bool = False
     subdivision: str = "midpoint"  # how coarse meshes reach the canonical resolution: midpoint | loop
     # close each boundary loop whose centroid cap adds at most this fraction of its piece's area
-    # (app.core.holes); 0 leaves every hole open. Scan-like open shapes (benchmarks/scans.py): +8.8
-    # points pure, +4.4 fused; closed meshes are untouched (docs/results.md, round 8)
+    # (app.core.holes); 0 leaves every hole open. A scanner's holes reflect the heat at their rims and
+    # change the signature; closing the small ones helps scan-like shapes and leaves closed meshes
+    # untouched (docs/results.md)
     fill_holes: float = 0.05
     solver: str = "auto"  # auto | dense | sparse
     keypoint_filter: KeypointFilter = field(default_factory=KeypointFilter)
@@ -74,6 +78,8 @@ class DescribeParams:
                              f"not {self.smoothing_weights!r}")
         if self.laplacian not in LAPLACIANS:
             raise ValueError(f"laplacian must be one of {', '.join(LAPLACIANS)}, not {self.laplacian!r}")
+        if not self.smoothing_target >= 0.0:
+            raise ValueError(f"smoothing_target must be >= 0, not {self.smoothing_target!r}")
         if not 0.0 <= self.fill_holes < 1.0:
             raise ValueError(f"fill_holes must be in [0, 1), not {self.fill_holes!r}")
         if self.time_range not in hks_mod.TIME_RANGES:
@@ -84,6 +90,8 @@ class DescribeParams:
         """A stable string naming these parameters (cache keys)."""
         d = asdict(self)
         f = d.pop("keypoint_filter")
+        if not d["smoothing_target"]:  # fixed smoothing names its descriptions as before the option
+            del d["smoothing_target"], d["smoothing_max"]
         parts = [f"{k}={v}" for k, v in sorted(d.items()) if k != "solver"]
         parts += [f"kf.{k}={v}" for k, v in sorted(f.items())]
         return ";".join(parts)
@@ -118,21 +126,28 @@ class ShapeDescription:
         return int(self.hks.shape[0])
 
     def save(self, path: str | Path) -> None:
-        """Write a .npz (no pickle)."""
+        """Write a .npz (no pickle); the HKS table packed losslessly (app/core/packing.py)."""
         with open(path, "wb") as fh:
             np.savez_compressed(
-                fh, hks=self.hks, weights=self.weights, keypoints=self.keypoints,
+                fh, hks_packed=pack_float32(self.hks), hks_shape=np.asarray(self.hks.shape, dtype=np.int64),
+                weights=self.weights, keypoints=self.keypoints,
                 eigenvalues=self.eigenvalues, input_vertices=np.int64(self.input_vertices),
                 format=np.int64(DESCRIPTION_FORMAT),
             )
 
     @classmethod
     def load(cls, path: str | Path) -> ShapeDescription:
+        """Read what save() writes, or a format-1 file (its HKS table stored as it is)."""
         with np.load(path, allow_pickle=False) as z:
-            if int(z["format"]) != DESCRIPTION_FORMAT:
-                raise ValueError(f"description format {int(z['format'])} is not {DESCRIPTION_FORMAT}")
+            found = int(z["format"])
+            if found not in (1, DESCRIPTION_FORMAT):
+                raise ValueError(f"description format {found} is not {DESCRIPTION_FORMAT}")
+            if found == 1:
+                hks = z["hks"]
+            else:
+                hks = unpack_float32(z["hks_packed"], tuple(int(x) for x in z["hks_shape"]))
             return cls(
-                hks=z["hks"], weights=z["weights"], keypoints=z["keypoints"].astype(bool),
+                hks=hks, weights=z["weights"], keypoints=z["keypoints"].astype(bool),
                 eigenvalues=z["eigenvalues"], input_vertices=int(z["input_vertices"]),
             )
 
@@ -168,9 +183,9 @@ def describe_canonical(fine: Mesh, input_vertices: int, params: DescribeParams) 
 def _from_canonical(fine: Mesh, input_vertices: int, params: DescribeParams,
                     filters: Sequence[KeypointFilter], clock: _Clock) -> list[ShapeDescription]:
     # resampling and smoothing are scale-free: one normalisation, after them, gives unit area
-    smoothed = taubin(fine, params.smoothing, params.smoothing_weights)
+    smoothed = smooth(fine, input_vertices, params)
     # remeshing after smoothing: an even sampling of a noisy surface spends its vertices on the
-    # noise's extra area (SHREC'11 noise variant: -23 points when remeshed first)
+    # noise's extra area (remeshing first loses badly on noisy queries: docs/results.md)
     if params.remesh:
         smoothed = isotropic_remesh(smoothed, params.target_vertices)
     work = normalize_scale(smoothed)
@@ -194,6 +209,19 @@ def _from_canonical(fine: Mesh, input_vertices: int, params: DescribeParams,
                          input_vertices=input_vertices, seconds=dict(clock.laps))
         for mask in masks
     ]
+
+
+def smooth(fine: Mesh, input_vertices: int, params: DescribeParams) -> Mesh:
+    """The canonical mesh as the eigen-solve sees it: Taubin smoothing, fixed or adaptive.
+
+    Adaptive: a mesh that was subdivided to reach the canonical resolution gets `smoothing` steps
+    first (the flat facets are the pipeline's own: every such mesh has them), then every mesh gets
+    Taubin pairs until its measured roughness is at most `smoothing_target`."""
+    if params.smoothing_target > 0:
+        floor = params.smoothing if fine.n_vertices > input_vertices else 0
+        return smooth_until(fine, params.smoothing_target, params.smoothing_max, params.smoothing_weights,
+                            min_steps=floor)[0]
+    return taubin(fine, params.smoothing, params.smoothing_weights)
 
 
 class _Clock:

@@ -4,8 +4,8 @@ Subdivision and quadric decimation bring a mesh to about 1,000 vertices but keep
 decimated mesh has its vertices bunched where the curvature is and long thin triangles on the flat
 parts; a subdivided one keeps the pattern of its coarse parent. The Bag of Features counts vertices,
 and the top of the spectrum (hence t_min) follows the smallest triangles, so two triangulations of one
-surface gave different descriptors (issue 11: 25 points of mAP between SHREC'11 and its re-triangulated
-copy with the intrinsic Laplacian and no smoothing). Botsch & Kobbelt's remeshing (split long edges,
+surface gave different descriptors (without smoothing, SHREC'11 queried with a re-triangulated copy of
+itself retrieves far worse: docs/results.md). Botsch & Kobbelt's remeshing (split long edges,
 collapse short ones, flip towards valence 6, relax tangentially, project back onto the input) makes
 every mesh an even sampling of its surface at one edge length, whatever it came from; vertices move
 only along the surface. gpytoolbox implements it.

@@ -41,8 +41,7 @@ def to_resolution(
     Midpoint rather than Loop subdivision: it adds sample points and leaves the surface exactly where
     it is, whereas Loop's limit surface shrinks a coarse mesh (a 500-face SHREC'11 mesh loses 13-16 %
     of its area, most of it on thin limbs and small protrusions that tell classes apart). Measured on
-    SHREC'11, Run 5, mean of 3 k-means seeds: mAP 99.08 against 98.84 with Loop, and 97.04 against
-    96.96 on noisy queries, although the drop from clean grows from 1.88 to 2.04 (docs/results.md).
+    SHREC'11, midpoint retrieves better than Loop on clean and on noisy queries (docs/results.md).
     The Taubin step that follows in describe() rounds the flat facets. subdivision="loop" keeps the
     first policy for comparison.
     """
@@ -129,9 +128,8 @@ def _regrid(unit: Mesh, target_vertices: int) -> Mesh | None:
     """When edge collapse stalls (CAD: fans of slivers, non-manifold seams): cluster to REGRID_TO x the
     target, drop the folds there (small holes at that resolution), and edge-collapse to the target from
     that regular grid. None when that fails too, or loses more than AREA_LOSS_MAX of the area (then
-    clustering straight to the target). On the realworld corpus, re-triangulated copies found
-    themselves more often than with direct clustering (NN 0.472 -> 0.500, top 5 0.651 -> 0.708; 28 of
-    106 copies stall: docs/results.md round 7)."""
+    clustering straight to the target). On the realworld corpus, re-triangulated copies find
+    themselves more often this way than with direct clustering (docs/results.md)."""
     try:
         out = _collapse(_unfolded(clean(cluster(unit, REGRID_TO * target_vertices))), target_vertices)
     except InvalidMeshError:

@@ -15,29 +15,22 @@ the shape does not shrink as plain Laplacian smoothing does. What W is decides w
 - "area": each neighbour j by the area of the one or two faces on the edge ij. The averaging runs
   over the surface of the vertex's star rather than over its count of neighbours, so a neighbour that
   stands for more surface pulls more; the vertex still slides along the surface as under uniform
-  weights. Face areas are intrinsic (they follow from the edge lengths). Measured (docs/results.md,
-  round 12): the best organic figures of any weighting (triangulation variant −0.63 from clean, noise
-  −1.01, fused), but −2.7 on the rigid column, where a decimated CAD part's few large faces drag
-  their vertices across it (airplanes −23): an option, not the default.
-- "capped-area" (DescribeParams' default since round 14, at 12 steps): the same, each face's area
-  capped at the mesh's median face area, so a face larger than usual counts as a usual one: smaller
-  faces (a crowded side) still count for less, a decimated CAD part's few large faces no longer drag
-  their vertices. At 10 steps it is within 0.15 of uniform weights on the organic columns and holds
-  the rigid one (round 13). At 12 steps, served with a vocabulary of the shipped recipe at three
-  seeds, it ties uniform Taubin 10 on SHREC'11 (99.50 against 99.51), its triangulation variant
-  (98.49 both), rigid, scan-like and synthetic shapes, and gains 0.4 under noise (98.62 against
-  98.23, the old defaults' 98.61): docs/results.md, round 14.
-- "uniform" (the default until round 14, at 10 steps): each neighbour by 1
-  (trimesh.smoothing.filter_taubin). It depends on the triangulation: on an irregular mesh it slides
-  vertices along the surface towards their neighbours' centroid and changes the shape by where the
-  vertices were (issue 11). That slide is also why it wins where the other weights lose: two
-  triangulations of one surface come out more alike (docs/results.md, round 10).
+  weights. Face areas are intrinsic (they follow from the edge lengths). It retrieves best on organic
+  shapes, but a decimated CAD part's few large faces drag their vertices across it, so it loses on
+  rigid parts: an option, not the default.
+- "capped-area" (the default): the same, each face's area capped at the mesh's median face area, so a
+  face larger than usual counts as a usual one: smaller faces (a crowded side) still count for less,
+  and a decimated CAD part's few large faces no longer drag their vertices. It is the weighting that
+  holds on every collection measured, noisy queries included.
+- "uniform": each neighbour by 1 (trimesh.smoothing.filter_taubin). It depends on the triangulation:
+  on an irregular mesh it slides vertices along the surface towards their neighbours' centroid and
+  changes the shape by where the vertices were. That slide is also why it does well across
+  triangulations: two triangulations of one surface come out more alike.
 
-`steps` counts single steps, λ then μ then λ ..., for every weighting (trimesh's convention): 10 steps
-are 5 λ|μ pairs. (Until round 10 the cotangent filter counted pairs, so "cotangent Taubin 10" ran
-twice the smoothing of "uniform Taubin 10"; docs/results.md, round 10.) The weights are computed once,
-from the input, and are scale-free; the update is linear in the coordinates, so every weighting
-commutes with rotation, translation, uniform scale and vertex order.
+The measurements behind these sentences are in docs/results.md. `steps` counts single steps, λ then μ
+then λ ..., for every weighting (trimesh's convention): 10 steps are 5 λ|μ pairs. The weights are
+computed once, from the input, and are scale-free; the update is linear in the coordinates, so every
+weighting commutes with rotation, translation, uniform scale and vertex order.
 """
 
 from __future__ import annotations
@@ -99,7 +92,7 @@ def taubin(mesh: Mesh, steps: int, weights: str) -> Mesh:
         raise ValueError(f"weights must be one of {', '.join(WEIGHTS)}, not {weights!r}")
     if steps <= 0:
         return mesh
-    if weights == "uniform":  # the library's filter: the descriptions of rounds 1-9 exactly
+    if weights == "uniform":  # the library's own filter, so uniform descriptions stay what they were
         tm = trimesh.Trimesh(mesh.vertices.copy(), mesh.faces, process=False)
         trimesh.smoothing.filter_taubin(tm, lamb=LAMBDA, nu=-MU, iterations=steps)
         return Mesh(np.asarray(tm.vertices, dtype=np.float64), mesh.faces)

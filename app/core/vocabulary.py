@@ -35,8 +35,8 @@ class EncodeParams:
 
     mode           : "soft" (eq. 5, the default) or "hard" (eq. 6, the paper's choice). Soft is the default
                      because it held on every dataset we measured: a descriptor near the border of two
-                     words no longer flips between them with the triangulation or the noise (issue 11,
-                     docs/results.md round 7)
+                     words no longer flips between them with the triangulation or the noise
+                     (docs/results.md)
     sigma_scale    : soft VQ width σ, as a multiple of the vocabulary's typical quantisation distance (the
                      median distance of its training descriptors to their word)
     keypoints_only : integrate over the filtered keypoints instead of all vertices (eq. 8)

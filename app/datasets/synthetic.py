@@ -24,6 +24,7 @@ GRID = 46  # voxels along the longest side (at least: thin limbs refine it)
 MAX_VERTICES = 3000  # finer marching-cubes output is decimated to this
 BLEND = 0.045  # smooth-union radius (body units): joints fuse without visible creases
 Segment = tuple[np.ndarray, np.ndarray, float, float]  # start (3,), end (3,), r_start, r_end
+Frame = tuple[np.ndarray, np.ndarray]  # rest start (3,), rotation (3, 3) of one segment
 
 
 def generate(out_dir: Path | str, classes: int = 6, per_class: int = 8, seed: int = 0) -> Path:
@@ -64,12 +65,25 @@ def make_shape(plan: str, rng: np.random.Generator) -> tuple[np.ndarray, np.ndar
 
 def pose(chains: list[Chain], rng: np.random.Generator) -> list[Segment]:
     """Jitter proportions and bend each joint: forward kinematics along every chain."""
+    return pose_frames(chains, rng)[0]
+
+
+def pose_frames(chains: list[Chain], rng: np.random.Generator,
+                jitter: bool = True) -> tuple[list[Segment], list[Frame]]:
+    """pose(), with each segment's rigid frame: a point x of the rest pose attached to segment s moves
+    to start_s + R_s (x - rest_start_s) (exact for the rest pose's own segment when jitter is False:
+    lengths and radii then stay those of the plan, so a template can be skinned by these frames).
+    The random stream is the same with and without jitter."""
     segments: list[Segment] = []
+    frames: list[Frame] = []
     for chain in chains:
         stretch = rng.uniform(0.92, 1.08)
         thick = rng.uniform(0.92, 1.08)
+        if not jitter:
+            stretch = thick = 1.0
         rot = np.eye(3)
         p = np.asarray(chain.anchor, dtype=float)
+        rest = p.copy()
         for d, length, (r0, r1), bend in zip(chain.dirs, chain.lengths, chain.radii, chain.bend, strict=True):
             direction = _unit(np.asarray(d, dtype=float))
             axis_draw = rng.normal(size=3)  # drawn for every joint: the stream does not depend on bends
@@ -82,8 +96,9 @@ def pose(chains: list[Chain], rng: np.random.Generator) -> list[Segment]:
                     rot = Rotation.from_rotvec(_unit(axis) * angle).as_matrix() @ rot
             end = p + rot @ direction * length * stretch
             segments.append((p, end, r0 * thick, r1 * thick))
-            p = end
-    return segments
+            frames.append((rest, rot.copy()))
+            p, rest = end, rest + direction * length
+    return segments, frames
 
 
 def surface(segments: list[Segment], grid: int = GRID, blend: float = BLEND,

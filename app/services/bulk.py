@@ -1,4 +1,4 @@
-"""Bulk ingestion of a labelled folder through the same path as uploads (resumable: content-hash dedup)."""
+"""Bulk ingestion of a folder of meshes through the same path as uploads (resumable: content-hash dedup)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from app.datasets.folder import read_labelled_folder
+from app.datasets.folder import read_mesh_folder
 from app.services import ingestion
 from app.services.context import ServiceContext
 from app.storage import jobs as jobs_repo
@@ -25,12 +25,15 @@ class BulkReport:
 def submit_folder(
     ctx: ServiceContext, directory: Path, on_file: Callable[[], None] = lambda: None
 ) -> BulkReport:
-    """Queue every mesh of `directory` (labels.csv aware); re-running resumes where it stopped."""
+    """Queue every mesh of `directory`, labelled by its labels.csv where it has one (or unlabelled:
+    datasets.folder.read_mesh_folder); re-running resumes where it stopped."""
     report = BulkReport()
-    for item in read_labelled_folder(directory):
+    root = Path(directory).resolve()
+    for item in read_mesh_folder(directory):
         try:
             data = item.path.read_bytes()
-            name = f"{item.label}/{item.path.stem}"
+            where = item.path.relative_to(root).with_suffix("").as_posix()  # unlabelled: the folder tells
+            name = f"{item.label}/{item.path.stem}" if item.label else where
             meta = {"source": item.path.name} | ({"split": item.split} if item.split else {})
             result = ingestion.submit(ctx, data, item.path.name, name=name, label=item.label, metadata=meta)
         except (OSError, ingestion.InvalidInputError) as exc:

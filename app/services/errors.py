@@ -47,6 +47,12 @@ class DescribeCrashedError(ServiceError):
     code = "describe_crashed"
 
 
+class InsufficientStorageError(ServiceError):
+    """The data directory is at its free-space floor or its quota: nothing new is written (507)."""
+
+    code = "insufficient_storage"
+
+
 class PoolBusyError(QueueFullError):
     """Every query process is busy and the wait queue is full (503 + Retry-After, as a full queue)."""
 

@@ -162,10 +162,12 @@ def describe_all(
     workers: int = 2,
     progress: bool = True,
     stats: DescribeStats | None = None,
+    label: str = "describe",
 ) -> DescribeStats:
     """Make sure the cache holds a description (and D2) of every (path, sha256) in `files`.
 
-    workers <= 1 runs in this process (no pool), which keeps tests and debugging simple.
+    workers <= 1 runs in this process (no pool), which keeps tests and debugging simple. `label` heads
+    the progress line (the evaluation names the rows these descriptions are for).
     """
     from app.progress import progress as tqdm  # plain lines off a terminal
 
@@ -182,7 +184,7 @@ def describe_all(
         if need_desc or need_d2:
             tasks.append(Task(str(path), sha, params, variant, str(desc_path) if need_desc else None,
                               str(d2_path) if need_d2 else None))
-    label = "describe" + (f" (noise {variant.noise:g})" if variant.noise else "")
+    label += f" (noise {variant.noise:g})" if variant.noise else ""
     errors: list[str] = []
     with tqdm(total=len(tasks), desc=label, unit="mesh", disable=not progress or not tasks) as bar:
         if workers <= 1:

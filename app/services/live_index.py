@@ -35,7 +35,7 @@ class ActivePair:
     cursor: int  # highest bof.seq of this version already in `index`
     params: EncodeParams  # how this version encodes its vectors and the queries (version_params)
     dirty: bool = False
-    reconciled: str = ""  # what happened at load: "loaded" | "rebuilt: <why>"
+    reconciled: str = ""  # what happened at load: "loaded" | "created" (no vectors yet) | "rebuilt: <why>"
 
 
 class LiveIndex:
@@ -76,14 +76,18 @@ class LiveIndex:
                 why = f"{index.count} ids in the file, {len(ids)} in the database"
         except IndexFileError as exc:
             why = str(exc)
+        reconciled = "loaded"
         if why:
-            log.warning("index of vocabulary %d rebuilt from stored vectors: %s", record.id, why)
             index = new_index(backend, dim)
             if len(ids):
                 index.add(ids, vectors)
+                log.warning("index of vocabulary %d rebuilt from stored vectors: %s", record.id, why)
+                reconciled = f"rebuilt: {why}"
+            else:  # a fresh data directory (or a version with no model yet): nothing was lost
+                log.info("index of vocabulary %d created empty (%s)", record.id, why)
+                reconciled = "created"
             index.save(path)
-        return ActivePair(record, vocab, index, cursor, params,
-                          reconciled=f"rebuilt: {why}" if why else "loaded")
+        return ActivePair(record, vocab, index, cursor, params, reconciled=reconciled)
 
     def refresh(self) -> int:
         """Follow the database: swap to a newly active version, add newly encoded models.

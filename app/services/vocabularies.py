@@ -62,9 +62,9 @@ def _warn_if_settings_wait(settings: EncodeParams, version: EncodeParams, versio
 
 def _warn_if_described_otherwise(vocab: Vocabulary, params: DescribeParams, version: int) -> None:
     """Say when a version's words were fit on descriptions made with other describe parameters than
-    this process makes (an upgrade that changed the describe defaults, as round 14 of issue 11 did, or
-    changed SHAPEBAG_DESCRIBE__*): the models stored before keep their old descriptions, so new uploads
-    and queries are compared with shapes described another way until the models are re-ingested."""
+    this process makes (an upgrade that changed the describe defaults, or changed SHAPEBAG_DESCRIBE__*):
+    the models stored before keep their old descriptions, so new uploads and queries are compared with
+    shapes described another way until the models are re-ingested."""
     changes = vocab.describe_changes(params)
     if changes:
         log.warning("vocabulary version %d was fit on descriptions made with %s; this process describes "

@@ -119,6 +119,20 @@ class BlobStore:
             return None
         return trash
 
+    def model_bytes(self, model_id: int, sha256: str, file_type: str) -> int:
+        """Bytes one model holds here: its mesh file, description, cached thumbnails and kept views (this
+        host's files only: the database backend's fetch-on-read would write to answer)."""
+        paths = [BlobStore.mesh_path(self, sha256, file_type), BlobStore.description_path(self, model_id)]
+        paths += (self.root / "thumbnails").glob(f"{model_id}-*.png")
+        paths += (self.root / "views").glob(f"{model_id}.*")
+        total = 0
+        for path in paths:
+            try:
+                total += path.stat().st_size
+            except FileNotFoundError:
+                continue
+        return total
+
     def delete_model_files(
         self, model_id: int, sha256: str | None = None, file_type: str = "", conn: Any = None
     ) -> None:

@@ -12,7 +12,7 @@ from app.services.context import open_context
 from app.storage import vocabularies as vocab_repo
 from tests.conftest import TEST_WORDS, make_settings, wait_for, wait_job
 
-TOKEN = {"X-Admin-Token": "test-token"}
+TOKEN = {"X-Admin-Token": "test-token-kkkkkkkkkkkkkkkkkkkkk"}
 
 
 def test_admin_routes_need_the_token(data_dir):
@@ -37,7 +37,7 @@ def test_default_admin_token_is_refused_outside_dev_mode(tmp_path):
 
     with pytest.raises(ValueError, match="ADMIN_TOKEN"):
         create_app(make_settings(tmp_path, dev_mode=False, admin_token="change-me"))
-    create_app(make_settings(tmp_path, dev_mode=False, admin_token="s3cret"))  # a real secret is fine
+    create_app(make_settings(tmp_path, dev_mode=False, admin_token="s3cret" * 6))  # a real secret is fine
 
 
 def test_rebuild_swaps_versions_while_searches_keep_answering(data_dir, corpus):

@@ -15,7 +15,7 @@ from app.main import create_app
 from app.storage.jobs import JobRecord
 from tests.conftest import make_settings
 
-ADMIN = {"X-Admin-Token": "test-token"}
+ADMIN = {"X-Admin-Token": "test-token-kkkkkkkkkkkkkkkkkkkkk"}
 
 
 @pytest.fixture(scope="module")

@@ -27,7 +27,7 @@ def test_served_over_http(data_dir, corpus, tmp_path):
     env = dict(
         os.environ,
         SHAPEBAG_DATA_DIR=str(data_dir),
-        SHAPEBAG_ADMIN_TOKEN="e2e-secret",
+        SHAPEBAG_ADMIN_TOKEN="e2e-secret-kkkkkkkkkkkkkkkkkkkkk",
         SHAPEBAG_WORKERS="1",
         SHAPEBAG_DESCRIBE__K="40",
         SHAPEBAG_DESCRIBE__M="20",
@@ -84,7 +84,10 @@ def test_served_over_http(data_dir, corpus, tmp_path):
             assert 'shapebag_describe_seconds_count{where="query"}' in metrics
             assert http.post("/admin/index/rebuild").status_code == 401
             assert (
-                http.post("/admin/index/rebuild", headers={"X-Admin-Token": "e2e-secret"}).status_code == 202
+                http.post(
+                    "/admin/index/rebuild", headers={"X-Admin-Token": "e2e-secret-kkkkkkkkkkkkkkkkkkkkk"}
+                ).status_code
+                == 202
             )
     finally:
         server.send_signal(signal.SIGTERM)

@@ -77,7 +77,9 @@ def test_upload_ingest_search_duplicate_and_delete(data_dir, corpus):
         blobs = BlobStore(data_dir.resolve())
         mesh_file = blobs.mesh_path(model["sha256"], model["file_type"])
         assert mesh_file.is_file() and blobs.description_path(model["id"]).is_file()
-        admin = {"X-Admin-Token": "test-token"}  # no SHAPEBAG_API_TOKEN: deletion needs the admin token
+        admin = {
+            "X-Admin-Token": "test-token-kkkkkkkkkkkkkkkkkkkkk"
+        }  # no SHAPEBAG_API_TOKEN: deletion needs the admin token
         assert client.delete(f"/models/{model['id']}").status_code == 401
         assert client.delete(f"/models/{model['id']}", headers=admin).status_code == 204
         assert client.get(f"/models/{model['id']}").status_code == 404

@@ -7,7 +7,7 @@ import asyncio
 import pytest
 from starlette.requests import Request
 
-from app.api.uploads import MAX_FIELD_BYTES, read_form
+from app.api.uploads import MAX_FIELD_BYTES, human_size, read_form
 from app.services.errors import InvalidInputError, PayloadTooLargeError
 
 BOUNDARY = "xYzZy"
@@ -70,6 +70,22 @@ def test_declared_length_over_the_limit_is_refused_before_reading():
     with pytest.raises(PayloadTooLargeError):
         asyncio.run(read_form(request, max_bytes=10_000))
     assert sent == []
+
+
+def test_the_413_states_the_limit_in_binary_units_and_in_bytes():
+    request, _ = _request(_body(b"x" * 100), headers={"content-length": str(10**9)})
+    with pytest.raises(PayloadTooLargeError) as refused:
+        asyncio.run(read_form(request, max_bytes=50 * 1024 * 1024))  # the default limit
+    assert str(refused.value) == "the upload is larger than the limit of 50 MiB (52428800 bytes)"
+
+
+@pytest.mark.parametrize(("n", "text"), [
+    (0, "0 bytes"), (1, "1 byte"), (1023, "1023 bytes"), (1024, "1 KiB"), (1536, "1.5 KiB"),
+    (1024 * 1024 - 52, "1023.9 KiB"), (1024 * 1024 - 40, "1 MiB"),  # 1023.96 KiB prints as 1 MiB
+    (50 * 1024 * 1024, "50 MiB"), (50 * 1024 * 1024 + 60_000, "50.1 MiB"), (3 * 1024**4, "3 TiB"),
+])
+def test_human_size_uses_binary_units_with_at_most_one_decimal(n, text):
+    assert human_size(n) == text
 
 
 def test_not_multipart_is_a_clear_error():

@@ -18,7 +18,7 @@ import pytest
 
 from app.config import SHIPPED_VOCABULARY, DescribeSettings
 from tests.api.live import live_server
-from tests.api.test_web_browser import VIEWPORT, launch, needs_chromium
+from tests.api.test_web_browser import VIEWPORT, launch, needs_chromium, wait_until
 from tests.conftest import make_settings, wait_for
 
 REPO = Path(__file__).resolve().parents[2]
@@ -70,7 +70,7 @@ def test_quick_start_upload_results_viewer_and_explanation(tmp_path: Path, corpu
         page.set_input_files("#file", str(query))
         page.wait_for_selector("#search-results .card.hit", timeout=90_000)
         # a placeholder may show while a thumbnail renders; once done, none is pending and none is blank
-        page.wait_for_function(
+        wait_until(page,
             "document.querySelectorAll('#search-results .thumb.pending').length === 0", timeout=90_000
         )
         cards = page.locator("#search-results .card.hit")
@@ -86,7 +86,7 @@ def test_quick_start_upload_results_viewer_and_explanation(tmp_path: Path, corpu
         pages_before = len(browser.contexts[0].pages)
         cards.first.click()
         page.wait_for_selector("#search-results .compare .view3d[data-rendered] canvas", timeout=90_000)
-        page.wait_for_function(
+        wait_until(page,
             "document.querySelectorAll('#search-results .view3d[data-rendered]').length === 2", timeout=30_000
         )
         assert len(browser.contexts[0].pages) == pages_before

@@ -32,3 +32,14 @@ def test_page_asks_the_explain_api_and_opens_hits_in_the_same_tab() -> None:
 def test_styles_keep_headings_clear_of_the_sticky_bar_and_show_a_placeholder() -> None:
     css = (STATIC / "style.css").read_text()
     assert "scroll-margin-top" in css and ".thumb.pending::after" in css and ".thumb.failed::after" in css
+    # every container app.js scrolls into view carries the margin, not only what it holds (Browse -> click
+    # scrolled #similar-results itself, whose heading then slid under the bar)
+    app = (STATIC / "app.js").read_text()
+    within_one_function = (r'const out = \$\("([\w-]+)"\);'  # out = $("id") ... out.scrollIntoView
+                           r"(?:(?!\nasync function|\nfunction).)*?out\.scrollIntoView")
+    scrolled = set(re.findall(within_one_function, app, re.S))
+    assert "similar-results" in scrolled
+    rule = next(block for block in re.findall(r"([^{}]+)\{[^}]*scroll-margin-top", css))
+    selectors = {sel.strip() for sel in rule.split(",")}
+    assert {f"#{name}" for name in scrolled} <= selectors, (scrolled, selectors)
+    assert "var(--topbar-height" in css and "--topbar-height" in app  # the bar's real height, not a guess

@@ -36,6 +36,26 @@ def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     describer.close()
 
 
+
+def test_the_file_picker_and_its_hint_list_every_format_read(client: TestClient) -> None:
+    from app.core.formats import READERS
+
+    html = client.get("/").text
+    (accept,) = re.findall(r'<input type="file" id="file"[^>]*accept="([^"]*)"', html)
+    assert sorted(accept.split(",")) == sorted(f".{ext}" for ext in READERS)
+    hint = re.search(r'<p class="drop-hint">([^<]*)', html).group(1)
+    assert all(ext.upper() in hint for ext in READERS) and "{{" not in html
+
+
+def test_search_help_lists_every_format_read(capsys) -> None:
+    from app.cli import main
+    from app.core.formats import READERS
+
+    with pytest.raises(SystemExit):
+        main(["search", "--help"])
+    text = " ".join(capsys.readouterr().out.split())  # argparse wraps the help
+    assert all(ext in text for ext in READERS), text
+
 def _obj(mesh: trimesh.Trimesh) -> bytes:
     return mesh.export(file_type="obj").encode()
 

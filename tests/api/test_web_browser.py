@@ -29,6 +29,16 @@ CHROMIUM_ARGS = [  # no GPU, no sandbox as root, and no background calls to a ne
 VIEWPORT = {"width": 1280, "height": 900}
 
 
+def wait_until(page, expression: str, timeout: int = 30_000) -> None:  # type: ignore[no-untyped-def]
+    """page.wait_for_function without its in-page eval, which the page's CSP (no 'unsafe-eval') refuses:
+    poll page.evaluate, which runs over the DevTools protocol, outside the page's policy."""
+    deadline = time.monotonic() + timeout / 1000
+    while not page.evaluate(expression):
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{expression[:80]!r} not true within {timeout / 1000:g} s")
+        page.wait_for_timeout(100)
+
+
 def launch(playwright):  # type: ignore[no-untyped-def]
     return playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
 
@@ -45,7 +55,7 @@ def capture_results(base_url: str, query: Path, screenshot: Path | None = None, 
         page.set_input_files("#file", str(query))
         page.wait_for_selector("#search-results .card.hit", timeout=90_000)
         try:
-            page.wait_for_function(  # every thumbnail (and the query preview) decoded
+            wait_until(page,   # every thumbnail (and the query preview) decoded
                 "[...document.querySelectorAll('#search-results img')]"
                 ".every(i => i.complete && i.naturalWidth > 0)",
                 timeout=60_000,
@@ -171,7 +181,7 @@ def test_browse_filter_similar_and_error_message(served: str, corpus) -> None:
         page.fill("#label-filter", labels[0])
         per_label = len(corpus.seeded) // len(labels)
         try:
-            page.wait_for_function(f"$('page-info').textContent.endsWith(' of {per_label}')")
+            wait_until(page, f"$('page-info').textContent.endsWith(' of {per_label}')")
         except Exception as exc:
             shows = page.text_content("#page-info"), page.text_content("#error-text")
             raise AssertionError(f"filter {labels[0]!r}: the page shows {shows!r}") from exc
@@ -186,6 +196,22 @@ def test_browse_filter_similar_and_error_message(served: str, corpus) -> None:
         ids = [int(x) for x in page.locator("#similar-results .card.hit").evaluate_all(
             "cards => cards.map(c => c.dataset.modelId)")]
         assert ids and model_id not in ids
+        # from the bottom of a grid taller than the window, a click scrolls up to the similar models with
+        # their heading below the sticky top bar, not under it
+        page.set_viewport_size({"width": 1280, "height": 480})
+        page.evaluate("window.scrollTo(0, document.body.scrollHeight)")
+        last = page.locator("#grid .card.model").last
+        name = last.locator(".name").text_content()
+        last.click()
+        page.wait_for_function(
+            "(name) => document.querySelector('#similar-results .card.query .name')?.textContent === name",
+            arg=name,
+        )
+        page.wait_for_timeout(800)  # let the smooth scroll settle before measuring
+        top = page.evaluate("document.querySelector('#similar-results h2').getBoundingClientRect().top")
+        bar = page.evaluate("document.querySelector('.topbar').getBoundingClientRect().bottom")
+        assert top >= bar, f"the sticky header ({bar}px) covers the similar models' heading ({top}px)"
+        page.set_viewport_size(VIEWPORT)
 
         # a broken upload: the API's message is shown, nothing else breaks
         page.click("#tab-search")

@@ -21,6 +21,7 @@ from app.core.formats.common import (
     text_lines,
     whole_numbers,
 )
+from app.core.formats.dae import read_dae
 from app.core.formats.gltf import (
     MAX_INSTANCES,
     _buffers,
@@ -36,10 +37,11 @@ from app.core.formats.gltf import (
 )
 from app.core.formats.obj import read_obj
 from app.core.formats.off import read_off
-from app.core.formats.other import read_3mf, read_dae, read_drc
+from app.core.formats.other import read_drc
 from app.core.formats.ply import read_ply
 from app.core.formats.scene import load_with_trimesh, scene_arrays, short
 from app.core.formats.stl import read_stl
+from app.core.formats.threemf import read_3mf
 from app.core.meshdata import FACE_FACTOR, RAW_VERTEX_FACTOR, Budget, InvalidMeshError, UnsupportedFormatError
 from tests.core.test_formats import tetra_doc
 
@@ -405,7 +407,6 @@ def test_off_header_and_counts_refusals_in_words(data, limit, message):
 def _binary_stl(count: int, declared: int | None = None, header: bytes = b"\x00" * 80) -> bytes:
     import struct
 
-
     records = np.zeros(count, dtype=[("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
     records["corners"] = np.arange(count * 9, dtype=np.float32).reshape(count, 3, 3)
     return header + struct.pack("<I", count if declared is None else declared) + records.tobytes()
@@ -652,7 +653,6 @@ def _binary_ply(face_count: int, faces: bytes) -> bytes:
 def test_binary_ply_faces_of_mixed_sizes_are_fanned():
     import struct
 
-
     data = _binary_ply(2, struct.pack("<B3i", 3, 0, 1, 2) + struct.pack("<B4i", 4, 0, 1, 2, 3))
     assert read_ply(data, Budget())[1].tolist() == [[0, 1, 2], [0, 1, 2], [0, 2, 3]]
 
@@ -861,7 +861,6 @@ _UCHAR_INT = b"property list uchar int vertex_indices\n"
 def test_a_binary_ply_whose_vertex_bytes_spell_end_header_is_read():
     import struct
 
-
     odd = struct.unpack("<3f", b"end_header\x00\x00")  # the header ends at the first end_header
     data = _ply_bytes([*_TRIANGLE, odd], _UCHAR_INT, struct.pack("<B3i", 3, 0, 1, 3), 1)
     vertices, faces = read_ply(data, Budget())
@@ -877,7 +876,6 @@ def test_an_ascii_ply_ending_at_end_header_has_no_element_lines():
 
 def test_binary_ply_vertices_last_may_end_exactly_at_the_end_of_the_file():
     import struct
-
 
     data = (
         b"ply\nformat binary_little_endian 1.0\nelement face 1\n"
@@ -929,8 +927,6 @@ def test_binary_ply_face_truncation_and_corner_refusals_in_words(decl, faces, co
 def test_binary_ply_mixed_size_faces_are_int64():
     import struct
 
-
-
     data = _binary_ply(2, struct.pack("<B3i", 3, 0, 1, 2) + struct.pack("<B4i", 4, 0, 1, 2, 3))
     faces = read_ply(data, Budget())[1]
     assert faces.dtype == np.int64 and faces.tolist() == [[0, 1, 2], [0, 1, 2], [0, 2, 3]]
@@ -939,14 +935,12 @@ def test_binary_ply_mixed_size_faces_are_int64():
 def test_a_binary_ply_of_one_triangle_and_nothing_after_it_is_read():
     import struct
 
-
     data = _ply_bytes(_TRIANGLE, _UCHAR_INT, struct.pack("<B3i", 3, 0, 1, 2), 1)
     assert read_ply(data, Budget())[1].tolist() == [[0, 1, 2]]
 
 
 def test_a_binary_ply_face_with_a_scalar_equal_to_its_corner_count_is_read():
     import struct
-
 
     decl = b"property uchar flags\n" + _UCHAR_INT
     data = _ply_bytes(_TRIANGLE, decl, struct.pack("<BB3i", 3, 3, 0, 1, 2), 1)
@@ -955,7 +949,6 @@ def test_a_binary_ply_face_with_a_scalar_equal_to_its_corner_count_is_read():
 
 def test_a_binary_ply_face_of_112_corners_is_fanned_from_its_own_bytes():
     import math
-
 
     ring = [(math.cos(i / 18), math.sin(i / 18), 0.0) for i in range(112)]  # 112 == ord("p"), as "ply"
     data = _ply_bytes(ring, b"property list uchar uchar vertex_indices\n", bytes([112, *range(112)]), 1)
@@ -1027,7 +1020,6 @@ def test_gltf_buffer_refusals_in_words(buffers, chunk, what, message):
 
 def test_a_binary_ply_face_record_missing_entirely_is_truncated_in_words():
     import struct
-
 
     data = _ply_bytes(_TRIANGLE, _UCHAR_INT, struct.pack("<B3i", 3, 0, 1, 2), 2)  # the second face is absent
     assert _refusal(read_ply, data, Budget()) == (
@@ -1134,7 +1126,6 @@ def test_the_canonical_glb_is_a_well_formed_glb_with_8_byte_aligned_buffers():
     import json
     import struct
 
-
     doc = {
         "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "material": 0}]}],
         "materials": [{}],
@@ -1168,7 +1159,6 @@ def test_the_canonical_glb_is_a_well_formed_glb_with_8_byte_aligned_buffers():
 def test_a_canonical_glb_of_a_document_without_views_or_meshes_has_no_binary_chunk():
     import json
     import struct
-
 
     glb = _canonical_glb({"asset": {"version": "2.0"}}, [])
     json_length, json_type = struct.unpack_from("<II", glb, 12)
@@ -1213,10 +1203,13 @@ def test_gltf_buffer_views_must_lie_inside_their_buffer():
     for view in (
         {"buffer": 1, "byteOffset": 4, "byteLength": 7},
         {"buffer": 1, "byteLength": 11},
-        {"buffer": 1, "byteOffset": -1, "byteLength": 1},
         {"buffer": 0, "byteLength": 1},
     ):
         assert _refusal(_check_views, {"bufferViews": [view]}, buffers) == _VIEW_PAST
+    view = {"buffer": 1, "byteOffset": -1, "byteLength": 1}
+    assert _refusal(_check_views, {"bufferViews": [view]}, buffers) == (
+        "the glTF byteOffset is not a whole number in range: -1"
+    )
 
 
 def _accessor_doc(accessor: dict, view_length: int, stride: int | None = None) -> dict:
@@ -1261,7 +1254,10 @@ def test_gltf_accessors_without_a_view_or_elements_are_not_measured_and_negative
     _check_views({"accessors": [{"componentType": 5126, "type": "VEC3", "count": 5}]}, buffers)
     _check_views({"accessors": [{"bufferView": 7, "componentType": 1, "type": "?", "count": 0}]}, buffers)
     assert _refusal(_check_views, {"accessors": [{"count": -1}]}, buffers) == (
-        "a glTF accessor has a negative count: the file is corrupt"
+        "the glTF accessor count is not a whole number in range: -1"
+    )
+    assert _refusal(_check_views, {"accessors": [{"count": float("inf")}]}, buffers) == (
+        "the glTF accessor count is not a whole number in range: inf"
     )
 
 
@@ -1274,12 +1270,20 @@ def _recorder():
     return budget, calls
 
 
-_SCENE = "the glTF scene (each mesh counted once per node that places it)"
+_SCENE = "the glTF scene (each part counted once per placement)"
+
+
+def _pos(count: int) -> dict:
+    return {"count": count, "type": "VEC3", "componentType": 5126}
+
+
+def _idx(count: int, component: int = 5125) -> dict:
+    return {"count": count, "type": "SCALAR", "componentType": component}
 
 
 def test_gltf_counts_each_mesh_once_per_node_that_places_it():
     doc = {
-        "accessors": [{"count": 4}, {"count": 7}, {"count": 5}],
+        "accessors": [_pos(4), _idx(7), _pos(5)],
         "meshes": [
             {"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]},  # 4 vertices, 7 // 3 faces
             {"primitives": [{"attributes": {"POSITION": 2}}, {"attributes": {"POSITION": 2}}]},  # 10, 2 x 1
@@ -1293,27 +1297,41 @@ def test_gltf_counts_each_mesh_once_per_node_that_places_it():
 
 
 @pytest.mark.parametrize(
-    ("positions", "indices", "message"),
+    ("placements", "message"),
     [
-        (10**9, None, None),
-        (10**9 + 1, None, "the glTF scene expands to 1000000001 vertices through its node instances"),
-        (3, 3 * 10**9, None),
-        (3, 3 * 10**9 + 3, "the glTF scene expands to 3 vertices through its node instances"),
+        (10_000, None),
+        (
+            10_001,
+            "the glTF scene (each part counted once per placement) places 10001 meshes, more than the"
+            " limit of 10000: merge the instances into one mesh and export again",
+        ),
     ],
 )
-def test_gltf_scenes_may_expand_to_a_billion_vertices_or_faces_and_no_more(positions, indices, message):
-    primitive = {"attributes": {"POSITION": 0}}
-    accessors = [{"count": positions}]
-    if indices is not None:
-        primitive["indices"] = 1
-        accessors.append({"count": indices})
-    doc = {"accessors": accessors, "meshes": [{"primitives": [primitive]}], "nodes": [{"mesh": 0}]}
+def test_gltf_scenes_may_place_ten_thousand_meshes_and_no_more(placements, message):
+    doc = {
+        "accessors": [_pos(3), _idx(3)],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "nodes": [{"mesh": 0}] * placements,
+    }
     budget, calls = _recorder()
     if message is None:
         _check_counts(doc, budget)
-        assert [c[1] for c in calls] == [positions, (indices or positions) // 3]
+        assert [c[1] for c in calls] == [3 * placements, placements]
     else:
         assert _refusal(_check_counts, doc, budget) == message
+
+
+@pytest.mark.parametrize(
+    ("index", "words"),
+    [(_idx(3, 5126), "FLOAT SCALAR"), (_idx(3, 5122), "SHORT SCALAR"), (dict(_idx(3), type="VEC3"), "VEC3")],
+)
+def test_gltf_indices_must_be_unsigned_integer_scalars(index, words):
+    doc = {
+        "accessors": [_pos(3), index],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+    }
+    message = _refusal(_check_counts, doc, _recorder()[0])
+    assert words in message and "indices must be unsigned integers" in message
 
 
 def test_gltf_instances_follow_the_chosen_scene_and_multiply_shared_children():
@@ -1411,7 +1429,6 @@ def test_glb_container_refusals_in_words(data, message):
 def test_a_glb_chunk_past_the_end_and_glb_1_are_refused_in_words():
     import struct
 
-
     cut = b"glTF" + struct.pack("<II", 2, 24) + struct.pack("<II", 5, _J) + b"{}  "  # 5 declared, 4 there
     assert _refusal(read_glb, cut, Budget()) == "a GLB chunk runs past the end of the file: it is truncated"
     with pytest.raises(UnsupportedFormatError) as info:
@@ -1482,7 +1499,6 @@ def test_a_glb_in_a_zip_uses_its_binary_chunk():
     import json
     import struct
 
-
     doc = json.loads(_tetra_gltf(""))
     del doc["buffers"][0]["uri"]
     text = json.dumps(doc).encode()
@@ -1514,7 +1530,6 @@ def test_the_canonical_glb_keeps_each_meshs_other_keys_and_a_mesh_without_primit
     import json
     import struct
 
-
     doc = {"meshes": [{"name": "a", "weights": [0.5], "primitives": [{"mode": 4}]}, {"name": "b"}]}
     glb = _canonical_glb(doc, [])
     json_length = struct.unpack_from("<I", glb, 12)[0]
@@ -1541,7 +1556,7 @@ def test_an_empty_glb_binary_chunk_right_after_unpadded_json_is_read():
 def test_a_gltf_without_nodes_places_no_mesh():
     budget, calls = _recorder()
     _check_counts(
-        {"accessors": [{"count": 3}], "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}]}, budget
+        {"accessors": [_pos(3)], "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}]}, budget
     )
     assert calls == [("vertices", 0, _SCENE), ("faces", 0, _SCENE)]
 
@@ -1549,7 +1564,6 @@ def test_a_gltf_without_nodes_places_no_mesh():
 def test_a_gltf_of_points_only_is_refused_naming_gltf():
     import base64
     import json
-
 
     doc = json.loads(_tetra_gltf("data:;base64," + base64.b64encode(_tetra_bin()).decode()))
     doc["meshes"][0]["primitives"] = [{"attributes": {"POSITION": 0}, "mode": 0}]  # points
@@ -1570,7 +1584,6 @@ def test_glb_header_fields_are_unsigned_in_messages():
 def test_a_glb_chunk_size_of_2_gib_runs_past_the_end():
     import struct
 
-
     data = b"glTF" + struct.pack("<II", 2, 24) + struct.pack("<II", 2**31, _J) + b"{}  "
     assert _refusal(read_glb, data, Budget()) == "a GLB chunk runs past the end of the file: it is truncated"
 
@@ -1578,7 +1591,6 @@ def test_a_glb_chunk_size_of_2_gib_runs_past_the_end():
 @pytest.mark.parametrize("text", [b'{"a": 1} ', b'{"a": 1}  ', b'{"a": 1}   '])
 def test_glb_padding_after_a_json_chunk_of_any_length_is_skipped(text):
     import struct
-
 
     body = (
         struct.pack("<II", len(text), _J)
@@ -1661,7 +1673,6 @@ def test_a_glb_in_a_zip_reads_the_files_it_refers_to_and_is_named_glb():
     """A GLB's buffer may live in a file beside it: read from the .zip, relative to the GLB. Its
     refusals name it GLB."""
     import json
-
 
     doc = json.loads(_tetra_gltf("t.bin"))
     vertices, faces = read_zip(_zip({"x/model.glb": _glb(doc), "x/t.bin": _tetra_bin()}), Budget())

@@ -237,8 +237,10 @@ def test_a_description_round_trips_through_npz_bit_for_bit(tmp_path):
     assert type(again.input_vertices) is int and again.input_vertices == 42
     assert again.seconds == {}  # timings are not stored
     with np.load(tmp_path / "d.npz") as z:
-        assert sorted(z.files) == ["eigenvalues", "format", "hks", "input_vertices", "keypoints", "weights"]
-        assert int(z["format"]) == DESCRIPTION_FORMAT == 1
+        assert sorted(z.files) == [
+            "eigenvalues", "format", "hks_packed", "hks_shape", "input_vertices", "keypoints", "weights"
+        ]
+        assert int(z["format"]) == DESCRIPTION_FORMAT == 2
 
 
 def test_save_accepts_a_str_path_and_load_makes_the_keypoints_bool(tmp_path):
@@ -255,9 +257,9 @@ def test_save_accepts_a_str_path_and_load_makes_the_keypoints_bool(tmp_path):
 def test_load_refuses_another_format_in_words(tmp_path):
     desc = describe(CIGAR, SMALL)
     fields = dict(hks=desc.hks, weights=desc.weights, keypoints=desc.keypoints,
-                  eigenvalues=desc.eigenvalues, input_vertices=np.int64(42), format=np.int64(2))
+                  eigenvalues=desc.eigenvalues, input_vertices=np.int64(42), format=np.int64(3))
     np.savez(tmp_path / "v2.npz", **fields)
-    with pytest.raises(ValueError, match="^description format 2 is not 1$"):
+    with pytest.raises(ValueError, match="^description format 3 is not 2$"):
         ShapeDescription.load(tmp_path / "v2.npz")
 
 

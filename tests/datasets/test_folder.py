@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from app.datasets.folder import DatasetError, LabelledFile, read_labelled_folder
+from app.datasets.folder import DatasetError, LabelledFile, MeshFile, read_labelled_folder, read_mesh_folder
 
 SHREC = Path(__file__).resolve().parents[3] / "shared" / "datasets" / "shrec11-simplified"
 
@@ -72,6 +72,39 @@ def test_bad_rows(tmp_path: Path, rows: str, message: str) -> None:
     (tmp_path / "x.obj").write_text("v 0 0 0\n")
     with pytest.raises(DatasetError, match=message):
         read_labelled_folder(root)
+
+
+def test_a_folder_without_labels_csv_gives_every_mesh_file_unlabelled(tmp_path: Path) -> None:
+    root = tmp_path / "d"
+    names = ("b/chair.OBJ", "a.ply", "b/c/lamp.glb", "notes.txt", ".hidden/x.obj", "b/.x.stl", "scan.xyz")
+    for name in names:
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        (root / name).write_text("v 0 0 0\n")
+    items = read_mesh_folder(root)
+    found = [i.path.relative_to(root.resolve()).as_posix() for i in items]
+    assert found == ["a.ply", "b/c/lamp.glb", "b/chair.OBJ"]  # path order; not text, hidden or point clouds
+    assert all(isinstance(i, MeshFile) and i.label is None and i.path.is_absolute() for i in items)
+    with pytest.raises(DatasetError, match="labels.csv"):
+        read_labelled_folder(root)  # an evaluation still needs every label
+
+
+def test_empty_classes_and_a_file_only_header_are_unlabelled_for_ingestion(tmp_path: Path) -> None:
+    root = _folder(tmp_path / "d", "file,class\nx.obj,\ny.obj,cup\n", ["x.obj", "y.obj", "z.obj"])
+    assert [(i.path.name, i.label) for i in read_mesh_folder(root)] == [("x.obj", None), ("y.obj", "cup")]
+    with pytest.raises(DatasetError, match="both `file` and `class` must be filled in"):
+        read_labelled_folder(root)
+    only_files = _folder(tmp_path / "e", "file\nz.obj\n", ["z.obj"])
+    assert read_mesh_folder(only_files) == [MeshFile((only_files / "z.obj").resolve(), None)]
+    broken = _folder(tmp_path / "f", "file,class\n,cup\n", ["w.obj"])
+    with pytest.raises(DatasetError, match="`file` must be filled in"):
+        read_mesh_folder(broken)
+
+
+def test_a_folder_with_no_mesh_is_refused_naming_the_formats(tmp_path: Path) -> None:
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / "readme.txt").write_text("hi")
+    with pytest.raises(DatasetError, match=r"no mesh files \(\.obj, \.off, .*\) and no labels.csv"):
+        read_mesh_folder(tmp_path / "d")
 
 
 def test_dataset_error_is_a_value_error() -> None:

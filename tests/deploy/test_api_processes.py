@@ -22,7 +22,7 @@ from tests.pg_server import db_url, pg_admin_url  # noqa: F401 (fixtures)
 from tests.reliability.helpers import FAST_ENV
 
 pytestmark = [pytest.mark.slow]  # the PostgreSQL case is marked postgres by db_url
-TOKEN = "processes-test-token"
+TOKEN = "processes-test-token-kkkkkkkkkkk"
 SEARCH_COUNT = re.compile(
     r'^shapebag_request_seconds_count\{[^}]*method="POST",route="/search",status="200"\} (\S+)$', re.MULTILINE
 )

@@ -30,10 +30,10 @@ import app
 from app.config import Settings
 from app.main import create_app
 
-settings = Settings(data_dir=Path(sys.argv[1]), dev_mode=True, admin_token="wheel-test", workers=0,
-                    warm_up=False)
+token = "wheel-test-kkkkkkkkkkkkkkkkkkkkk"
+settings = Settings(data_dir=Path(sys.argv[1]), dev_mode=True, admin_token=token, workers=0, warm_up=False)
 with TestClient(create_app(settings)) as client:
-    r = client.get("/admin/vocabulary", headers={"X-Admin-Token": "wheel-test"})
+    r = client.get("/admin/vocabulary", headers={"X-Admin-Token": token})
     print(json.dumps({"app": app.__file__, "shipped": str(settings.default_vocabulary),
                       "status": r.status_code, "vocabulary": r.json()}))
 """

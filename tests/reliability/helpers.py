@@ -128,7 +128,10 @@ class Proc:
 
 def env_for(data_dir: Path, **extra: str) -> dict[str, str]:
     env = dict(
-        os.environ, **FAST_ENV, SHAPEBAG_DATA_DIR=str(data_dir), SHAPEBAG_ADMIN_TOKEN="reliability-secret"
+        os.environ,
+        **FAST_ENV,
+        SHAPEBAG_DATA_DIR=str(data_dir),
+        SHAPEBAG_ADMIN_TOKEN="reliability-secret-kkkkkkkkkkkkk",
     )
     env.update({k: str(v) for k, v in extra.items()})
     return env

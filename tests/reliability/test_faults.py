@@ -38,13 +38,15 @@ from tests.reliability.helpers import (
 )
 
 pytestmark = pytest.mark.slow
-TOKEN = {"X-Admin-Token": "reliability-secret"}
+TOKEN = {"X-Admin-Token": "reliability-secret-kkkkkkkkkkkkk"}
 HOOKS = Path(__file__).resolve().parent / "hooks"
 
 
 def hold(target: str, barrier: Path) -> dict[str, str]:
     """Environment that holds `module:function` at `barrier` in a real process (hooks/sitecustomize.py)."""
-    return {"PYTHONPATH": str(HOOKS), "SHAPEBAG_TEST_HOLD": target, "SHAPEBAG_TEST_HOLD_FILE": str(barrier)}
+    # the caller's PYTHONPATH kept: a checkout run with PYTHONPATH=. must serve its own app/
+    path = os.pathsep.join(p for p in (str(HOOKS), os.environ.get("PYTHONPATH", "")) if p)
+    return {"PYTHONPATH": path, "SHAPEBAG_TEST_HOLD": target, "SHAPEBAG_TEST_HOLD_FILE": str(barrier)}
 
 
 def consistent(data_dir: Path) -> dict:
@@ -229,8 +231,9 @@ def test_each_swap_prunes_versions_nobody_serves_including_one_left_by_a_killed_
     with ctx.db.read() as conn:
         first = vocab_repo.active(conn).id
         ready = len(models_repo.ready_ids(conn))
-    orphan = vocabularies.register(ctx, Vocabulary.fit_features(np.random.default_rng(0).random((50, 4)),
-                                                                size=8), activate=False)
+    orphan = vocabularies.register(
+        ctx, Vocabulary.fit_features(np.random.default_rng(0).random((50, 4)), size=8), activate=False
+    )
     with ctx.db.write() as conn:  # the killed rebuild had stored some vectors too
         vocab_repo.put_vector(conn, models_repo.ready_ids(conn)[0], orphan, np.ones(8, np.float32))
     assert ctx.vocabulary_dir(orphan).is_dir() and bof_rows(orphan) == 1

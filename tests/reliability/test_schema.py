@@ -23,7 +23,7 @@ from tests.reliability.helpers import start_server
 pytestmark = pytest.mark.slow
 MAX_EXAMPLES = 25  # per operation (15 operations): well under a minute on 2 busy cores
 CHECKS = [not_a_server_error, status_code_conformance, content_type_conformance, response_schema_conformance]
-TOKEN = "reliability-secret"
+TOKEN = "reliability-secret-kkkkkkkkkkkkk"
 
 
 def _runner(op, label: str, tried: dict[str, int], statuses: dict[int, int]):

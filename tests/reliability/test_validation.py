@@ -15,7 +15,7 @@ from tests.conftest import make_settings, wait_for
 from tests.reliability.corpus import duplicate_field_bodies, obj_text
 from tests.reliability.helpers import BOUNDARY, MULTIPART_HEADERS, snapshot
 
-ADMIN = {"X-Admin-Token": "test-token"}
+ADMIN = {"X-Admin-Token": "test-token-kkkkkkkkkkkkkkkkkkkkk"}
 
 
 @pytest.fixture(scope="module")

@@ -437,3 +437,37 @@ def test_paper_preset_is_the_papers_method(folder: Path, tmp_path: Path) -> None
     # and eq. 8, the sum over vertices, and hard VQ, though the default BoF is eq. 7's soft integral
     assert result.rows[0].details["encode"]["area_weighted"] is False
     assert result.rows[0].details["encode"]["mode"] == "hard"
+
+
+def test_the_paper_row_runs_only_when_asked(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """It solves at each mesh's own resolution (tens of seconds on a fine scan): not a default."""
+    from app.commands import evaluate as command
+    from app.services.evaluation import DEFAULT_ROWS, ROW_NAMES
+
+    seen: list[EvaluationOptions] = []
+
+    def fake(directory: Path, options: EvaluationOptions) -> None:
+        seen.append(options)
+        raise EvaluationError("stop here")
+
+    monkeypatch.setattr(command, "evaluate", fake)
+    parser = argparse.ArgumentParser()
+    command.register(parser.add_subparsers())
+    for argv in ([], ["--runs", "all"], ["--runs", "run5,paper"]):
+        args = parser.parse_args(["evaluate", str(tmp_path), *argv])
+        with pytest.raises(CommandError, match="stop here"):
+            args.func(args)
+    assert "paper" not in seen[0].rows and "paper" not in EvaluationOptions().rows
+    assert seen[0].rows == DEFAULT_ROWS and set(DEFAULT_ROWS) | {"paper"} == set(ROW_NAMES)
+    assert seen[1].rows == ROW_NAMES and seen[2].rows == ("run5", "paper")
+
+
+def test_the_progress_line_names_the_rows_it_describes_for(
+    folder: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    evaluate(folder, _options(tmp_path / "cache", rows=("run5", "run1", "paper", "shape-dna"), workers=1,
+                              progress=True, fusion=(1.0,)))
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("describe")]
+    heads = {line.split(":")[0] for line in lines}
+    # one describe pass per parameter set, named by every row it serves (fused rows share their row's)
+    assert heads == {"describe for run5, run1, shape-dna", "describe for paper"}, lines

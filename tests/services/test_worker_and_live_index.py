@@ -78,6 +78,39 @@ def test_ingestion_racing_a_swap_ends_encoded_with_the_new_vocabulary(data_dir, 
     assert _job(ctx, sub.job_id).state == "done"
 
 
+def test_a_fresh_data_directory_creates_its_empty_index_without_a_warning(tmp_path, caplog):
+    from app.config import SHIPPED_VOCABULARY
+
+    ctx = open_context(make_settings(tmp_path / "fresh", default_vocabulary=SHIPPED_VOCABULARY))
+    vocab_service.ensure_default(ctx)
+    live = LiveIndex(ctx)
+    with caplog.at_level("INFO", logger="app.services.live_index"):
+        live.refresh()
+    assert live.pair is not None and live.pair.reconciled == "created" and live.pair.index.count == 0
+    assert ctx.index_path(live.pair.record.id).exists()  # saved: the next start loads it
+    ours = [r for r in caplog.records if r.name == "app.services.live_index"]
+    assert ours and not [r for r in ours if r.levelno >= 30], [r.getMessage() for r in ours]
+    again = LiveIndex(ctx)
+    again.refresh()
+    assert again.pair.reconciled == "loaded"
+
+
+def test_a_lost_index_file_with_stored_vectors_is_rebuilt_with_a_warning(data_dir, caplog):
+    ctx = open_context(make_settings(data_dir))
+    first = LiveIndex(ctx)
+    first.refresh()
+    n = first.pair.index.count
+    path = ctx.index_path(first.pair.record.id)
+    path.unlink()
+    live = LiveIndex(ctx)
+    with caplog.at_level("INFO", logger="app.services.live_index"):
+        live.refresh()
+    assert n > 0 and live.pair.index.count == n and live.pair.reconciled.startswith("rebuilt: no index file")
+    ours = [r for r in caplog.records if r.name == "app.services.live_index"]
+    warned = [r.getMessage() for r in ours if r.levelno == 30]
+    assert any("rebuilt from stored vectors" in m for m in warned), warned
+
+
 def test_live_index_follows_new_vectors_and_rebuilds_a_disagreeing_file(data_dir):
     ctx = open_context(make_settings(data_dir))
     live = LiveIndex(ctx)

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, status
 
 from app.api.deps import AdminDep, CtxDep, RuntimeDep
 from app.api.schemas import ErrorResponse, JobAccepted, VocabularyPublic, VocabularyRebuild
+from app.api.space import RoomDep
 from app.core.descriptor import RUNS
 from app.services import maintenance
 from app.services.errors import InvalidInputError
@@ -20,9 +21,15 @@ def _enqueue(ctx, kind: str, payload: dict) -> JobAccepted:
     return JobAccepted(job_id=job_id, status=state, state=state)
 
 
-@router.post("/vocabulary/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted)
+# the data directory at its floor or quota (app/api/space.py)
+FULL: dict[int | str, dict[str, Any]] = {507: {"model": ErrorResponse}}
+
+
+@router.post(
+    "/vocabulary/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted, responses=FULL
+)
 def rebuild_vocabulary(
-    _: AdminDep, ctx: CtxDep, body: Annotated[VocabularyRebuild | None, Body()] = None
+    _: AdminDep, __: RoomDep, ctx: CtxDep, body: Annotated[VocabularyRebuild | None, Body()] = None
 ) -> JobAccepted:
     """Fit a new vocabulary on the stored descriptions, re-encode, re-index, swap (a job)."""
     body = body or VocabularyRebuild(size=ctx.settings.vocabulary_size, run=ctx.settings.vocabulary_run)
@@ -31,8 +38,10 @@ def rebuild_vocabulary(
     return _enqueue(ctx, "rebuild_vocabulary", body.model_dump())
 
 
-@router.post("/index/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted)
-def rebuild_index(_: AdminDep, ctx: CtxDep) -> JobAccepted:
+@router.post(
+    "/index/rebuild", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted, responses=FULL
+)
+def rebuild_index(_: AdminDep, __: RoomDep, ctx: CtxDep) -> JobAccepted:
     """Re-encode every model with the active vocabulary from its cached description (a job)."""
     return _enqueue(ctx, "rebuild_index", {})
 

@@ -15,6 +15,7 @@ from fastapi import APIRouter, Request
 from fastapi.openapi.docs import get_swagger_ui_html, get_swagger_ui_oauth2_redirect_html
 from fastapi.responses import FileResponse, HTMLResponse
 
+from app.api.security import csp_with_inline_scripts
 from app.services.errors import NotFoundError
 
 router = APIRouter(include_in_schema=False)
@@ -27,19 +28,27 @@ OAUTH2_REDIRECT = "/docs/oauth2-redirect"
 @router.get("/docs")
 def swagger_ui(request: Request) -> HTMLResponse:
     app = request.app
-    return get_swagger_ui_html(
-        openapi_url=app.openapi_url,
-        title=f"{app.title} · API docs",
-        swagger_js_url=f"{VENDOR_URL}/swagger-ui-bundle.js",
-        swagger_css_url=f"{VENDOR_URL}/swagger-ui.css",
-        swagger_favicon_url=f"{VENDOR_URL}/favicon-32x32.png",
-        oauth2_redirect_url=OAUTH2_REDIRECT,
+    return _with_csp(
+        get_swagger_ui_html(
+            openapi_url=app.openapi_url,
+            title=f"{app.title} · API docs",
+            swagger_js_url=f"{VENDOR_URL}/swagger-ui-bundle.js",
+            swagger_css_url=f"{VENDOR_URL}/swagger-ui.css",
+            swagger_favicon_url=f"{VENDOR_URL}/favicon-32x32.png",
+            oauth2_redirect_url=OAUTH2_REDIRECT,
+        )
     )
 
 
 @router.get(OAUTH2_REDIRECT)
 def swagger_ui_redirect() -> HTMLResponse:
-    return get_swagger_ui_oauth2_redirect_html()
+    return _with_csp(get_swagger_ui_oauth2_redirect_html())
+
+
+def _with_csp(page: HTMLResponse) -> HTMLResponse:
+    """The page's policy, admitting its own inline script (Swagger UI's start-up call) by hash."""
+    page.headers["Content-Security-Policy"] = csp_with_inline_scripts(bytes(page.body).decode())
+    return page
 
 
 @functools.cache

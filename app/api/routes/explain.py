@@ -28,7 +28,13 @@ AgainstQuery = Annotated[
     int | None, Query(ge=1, le=2**63 - 1, description="another model: both coloured, words ranked")
 ]
 EXPLAIN_BODY = multipart_body(
-    "the query mesh", against={"type": "integer", "description": "the model to compare it with"}
+    "the query mesh",
+    against={
+        "type": "integer",
+        "minimum": 1,
+        "maximum": 2**63 - 1,
+        "description": "the model to compare it with",
+    },
 )
 
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import mimetypes
-from typing import Annotated
+from typing import Annotated, Literal
 
 from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
@@ -22,6 +22,7 @@ from app.api.schemas import (
     SearchHit,
     SearchResponse,
 )
+from app.api.space import RoomDep
 from app.api.uploads import multipart_body, read_form
 from app.services import catalog, ingestion, metadata, rendering, search, views
 from app.services.errors import InvalidInputError, NotFoundError
@@ -31,10 +32,14 @@ ERRORS: dict[int | str, dict] = {c: {"model": ErrorResponse} for c in (404, 413,
 WRITE_ERRORS = {**ERRORS, 401: ERRORS[404]}
 
 UPLOAD_BODY = multipart_body(
-    "OBJ/OFF/PLY/STL/GLB",
-    name={"type": "string"},
-    label={"type": "string"},
-    metadata={"type": "string", "description": "a JSON object"},
+    "the mesh file",
+    name={"type": "string", "minLength": 1, "maxLength": limits.MAX_TEXT_CHARS},
+    label={"type": "string", "minLength": 1, "maxLength": 100},
+    metadata={
+        "type": "string",
+        "description": "a JSON object",
+        "maxLength": metadata.MAX_METADATA_BYTES,
+    },
 )
 
 
@@ -48,7 +53,7 @@ UPLOAD_BODY = multipart_body(
     },  # compressed body, time limit, disk
     openapi_extra=UPLOAD_BODY,
 )
-async def upload_model(request: Request, runtime: RuntimeDep, _: UploadDep) -> JSONResponse:
+async def upload_model(request: Request, runtime: RuntimeDep, _: UploadDep, __: RoomDep) -> JSONResponse:
     """Store a mesh and queue its ingestion (202); identical content answers 200 with the existing model."""
     ctx = runtime.ctx
     form = await read_form(request, ctx.settings.max_upload_bytes)
@@ -98,7 +103,7 @@ def _duplicate(result: ingestion.Submitted, name: str | None, label: str | None)
 def list_models(
     ctx: CtxDep,
     label: str | None = None,
-    status: str | None = Query(None, description="queued | ready | failed"),
+    status: Literal["queued", "ready", "failed"] | None = None,  # catalog.STATUSES
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     offset: limits.OffsetQuery = 0,
 ) -> ModelsPublic:
@@ -108,7 +113,9 @@ def list_models(
 
 @router.get("/{model_id}", response_model=ModelPublic, responses=ERRORS)
 def get_model(model_id: IdPath, ctx: CtxDep) -> ModelPublic:
-    return ModelPublic.of(catalog.get_model(ctx, model_id))
+    model = catalog.get_model(ctx, model_id)
+    stored = ctx.blobs.model_bytes(model.id, model.sha256, model.file_type)
+    return ModelPublic.of(model).model_copy(update={"stored_bytes": stored})
 
 
 @router.get("/{model_id}/mesh", responses=ERRORS, response_class=FileResponse)

@@ -12,11 +12,13 @@ import mimetypes
 from pathlib import Path
 
 from fastapi import APIRouter, Request, Response
-from fastapi.responses import FileResponse
+from fastapi.responses import FileResponse, HTMLResponse
 
 from app.api.deps import RuntimeDep
 from app.api.limits import upload_format
-from app.api.uploads import read_form
+from app.api.schemas import ErrorResponse
+from app.api.uploads import multipart_body, read_form
+from app.core.mesh import SUPPORTED_FORMATS
 from app.services.errors import NotFoundError
 from app.services.rendering import render_upload
 
@@ -25,9 +27,16 @@ STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 
 
 @router.get("/", include_in_schema=False)
-def index() -> FileResponse:
-    page = STATIC_DIR / "index.html"
-    return FileResponse(page, media_type="text/html", headers={"Cache-Control": "no-cache"})
+def index() -> HTMLResponse:
+    """The page, its file picker and its hint filled in from the readers' list (one list of formats)."""
+    return HTMLResponse(page_html(), headers={"Cache-Control": "no-cache"})
+
+
+def page_html() -> str:
+    html = (STATIC_DIR / "index.html").read_text(encoding="utf-8")
+    accept = ",".join(f".{ext}" for ext in SUPPORTED_FORMATS)
+    shown = " · ".join(ext.upper() for ext in SUPPORTED_FORMATS)
+    return html.replace("{{ accept }}", accept).replace("{{ formats }}", shown)
 
 
 @functools.cache
@@ -45,7 +54,20 @@ def static(name: str) -> FileResponse:
     return FileResponse(path, media_type=media, headers={"Cache-Control": "no-cache"})
 
 
-@router.post("/web/preview.png", response_class=Response, include_in_schema=False)
+PREVIEW_ERRORS = {c: {"model": ErrorResponse} for c in (403, 413, 415, 422, 503, 504)}
+PREVIEW = {
+    **multipart_body("the mesh to render"),
+    "responses": {"200": {"description": "the rendered mesh", "content": {"image/png": {}}}},
+}
+
+
+@router.post(
+    "/web/preview.png",
+    response_class=Response,
+    responses=PREVIEW_ERRORS,  # type: ignore[arg-type]
+    openapi_extra=PREVIEW,
+    summary="Render an uploaded mesh as a PNG (the web page's query thumbnail; nothing is stored)",
+)
 async def preview(request: Request, runtime: RuntimeDep) -> Response:
     """Render the uploaded mesh (multipart `file`) as the page's query thumbnail; nothing is stored.
 

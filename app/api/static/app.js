@@ -50,7 +50,7 @@ function el(tag, attrs = {}, ...children) {
 
 const thumbUrl = (id) => `/models/${id}/thumbnail.png`;
 const fmtSeconds = (s) => (s >= 1 ? `${s.toFixed(2)} s` : `${Math.max(1, Math.round(s * 1000))} ms`);
-const fmtBytes = (n) => (n > 1048576 ? `${(n / 1048576).toFixed(1)} MB` : `${Math.ceil(n / 1024)} KB`);
+const fmtBytes = (n) => (n > 1048576 ? `${(n / 1048576).toFixed(1)} MiB` : `${Math.ceil(n / 1024)} KiB`);  // binary units, as the 413 says
 
 function thumb(src, alt, lazy = false) {
   // a placeholder until the server's rendering arrives (the first one of a model takes a moment), and
@@ -315,7 +315,15 @@ function route() {
   else selectTab(name === "browse" ? "browse" : "search");
 }
 
+function trackTopbarHeight() {  // style.css's scroll margins clear the sticky bar at its real height
+  const bar = document.querySelector(".topbar");
+  const update = () => document.documentElement.style.setProperty("--topbar-height", `${bar.offsetHeight}px`);
+  update();
+  new ResizeObserver(update).observe(bar);
+}
+
 function init() {
+  trackTopbarHeight();
   for (const tab of document.querySelectorAll(".tab[data-tab]")) {
     tab.addEventListener("click", () => selectTab(tab.dataset.tab));
   }

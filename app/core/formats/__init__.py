@@ -11,13 +11,16 @@ from collections.abc import Callable
 
 import numpy as np
 
+from app.core.formats.containers import is_zip, open_zip
+from app.core.formats.dae import read_dae
 from app.core.formats.gltf import read_glb, read_gltf, read_zip
 from app.core.formats.obj import read_obj
 from app.core.formats.off import read_off
-from app.core.formats.other import read_3mf, read_dae, read_drc
+from app.core.formats.other import read_drc
 from app.core.formats.ply import read_ply
 from app.core.formats.stl import read_stl
-from app.core.meshdata import Budget, UnsupportedFormatError
+from app.core.formats.threemf import read_3mf
+from app.core.meshdata import Budget, InvalidMeshError, UnsupportedFormatError
 
 Reader = Callable[[bytes, Budget], tuple[np.ndarray, np.ndarray]]
 
@@ -76,6 +79,28 @@ def detect_format(name_or_type: str) -> str:
     )
 
 
+ZIPPED = ("zip", "3mf", "dae")  # formats that may be zip archives (a .dae: a zipped .zae)
+
+
 def parse(data: bytes, file_type: str, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
-    """bytes -> vertices (n, 3) float64, faces (f, 3) int64, as the file has them (not yet cleaned)."""
+    """bytes -> vertices (n, 3) float64, faces (f, 3) int64, as the file has them (not yet cleaned).
+
+    Bytes that are a zip under another name go through the same capped reader as a .zip (a bomb, an
+    unsupported method or version is named as such), then are refused: no other reader unpacks.
+    """
+    if file_type not in ZIPPED and is_zip(data) and not _is_binary_stl(data, file_type):
+        open_zip(data, budget, f".{file_type}").close()
+        raise InvalidMeshError(
+            f"the .{file_type} file is a zip archive: unzip it and upload the file inside"
+            " (a glTF with its files may be uploaded as one .zip)"
+        )
     return READERS[file_type](data, budget)
+
+
+def _is_binary_stl(data: bytes, file_type: str) -> bool:
+    """A binary STL's 80-byte header is free text and may start like a zip; its size then gives it away."""
+    return (
+        file_type == "stl"
+        and len(data) >= 84
+        and len(data) == 84 + 50 * int.from_bytes(data[80:84], "little")
+    )

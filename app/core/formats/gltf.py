@@ -19,6 +19,7 @@ from urllib.parse import unquote
 
 import numpy as np
 
+from app.core.formats import graph
 from app.core.formats.containers import open_zip, read_member
 from app.core.formats.scene import load_with_trimesh
 from app.core.meshdata import Budget, InvalidMeshError, UnsupportedFormatError
@@ -27,7 +28,9 @@ _JSON, _BIN = 0x4E4F534A, 0x004E4942
 _COMPONENT = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _MESHOPT = ("EXT_meshopt_compression", "KHR_meshopt_compression")
-MAX_INSTANCES = 10**9  # even with no vertex limit, a node graph may not expand past this
+MAX_INSTANCES = 10**9  # a node's count of placements saturates here (the limits are far below)
+_INDEX_TYPES = {5121: "UNSIGNED_BYTE", 5123: "UNSIGNED_SHORT", 5125: "UNSIGNED_INT"}
+_NAMES = {5120: "BYTE", 5122: "SHORT", 5126: "FLOAT", **_INDEX_TYPES}
 Files = Callable[[str], bytes]
 
 
@@ -123,11 +126,12 @@ def _read(
         raise InvalidMeshError(f"the {what} file holds no triangle mesh (it has no meshes)")
     try:
         _check_extensions(doc)
+        _check_declared(doc)
         buffers = _buffers(doc, chunk, files, what, budget)
         _check_views(doc, buffers)
         _check_counts(doc, budget)
         glb = _canonical_glb(doc, buffers)
-    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError) as exc:
         if isinstance(exc, InvalidMeshError):
             raise
         raise InvalidMeshError(f"could not read the file as {what}: its JSON structure is invalid") from exc
@@ -172,7 +176,7 @@ def _buffers(doc: dict, chunk: bytes | None, files: Files | None, what: str, bud
             )
         else:
             data = files(uri)
-        if int(buffer.get("byteLength", 0)) > len(data):
+        if _n(buffer.get("byteLength", 0), "buffer byteLength") > len(data):
             raise InvalidMeshError(
                 f"the {what} buffer {i} declares {buffer['byteLength']} bytes, but holds {len(data)}:"
                 " it is truncated"
@@ -181,24 +185,37 @@ def _buffers(doc: dict, chunk: bytes | None, files: Files | None, what: str, bud
     return out
 
 
+def _n(value: object, what: str) -> int:
+    """A JSON number that must be a whole number in range (a count, an index, an offset) -> int."""
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**53:
+        raise InvalidMeshError(f"the glTF {what} is not a whole number in range: {str(value)[:30]}")
+    return value
+
+
 def _check_views(doc: dict, buffers: list[bytes]) -> None:
     """Every buffer view inside its buffer; every accessor inside its view."""
     views = doc.get("bufferViews", [])
     for view in views:
-        end = int(view.get("byteOffset", 0)) + int(view["byteLength"])
-        if int(view.get("byteOffset", 0)) < 0 or end > len(buffers[int(view["buffer"])]):
+        start, length = _n(view.get("byteOffset", 0), "byteOffset"), _n(view["byteLength"], "byteLength")
+        if start + length > len(buffers[_n(view["buffer"], "buffer index")]):
             raise InvalidMeshError("a glTF buffer view runs past the end of its buffer: the file is corrupt")
     for accessor in doc.get("accessors", []):
-        count = int(accessor["count"])
-        if count < 0:
-            raise InvalidMeshError("a glTF accessor has a negative count: the file is corrupt")
+        count = _n(accessor["count"], "accessor count")
         if "bufferView" not in accessor or count == 0:
             continue
-        view = views[int(accessor["bufferView"])]
-        element = _COMPONENT[int(accessor["componentType"])] * _WIDTH[accessor["type"]]
-        stride = int(view.get("byteStride", 0)) or element
-        need = int(accessor.get("byteOffset", 0)) + stride * (count - 1) + element
-        if need > int(view["byteLength"]):
+        kind = _n(accessor["componentType"], "accessor componentType")
+        if kind not in _COMPONENT or accessor.get("type") not in _WIDTH:
+            raise InvalidMeshError(
+                f"a glTF accessor has an unknown type ({kind}, {str(accessor.get('type'))[:20]}): the file is"
+                " corrupt"
+            )
+        view = views[_n(accessor["bufferView"], "bufferView index")]
+        element = _COMPONENT[kind] * _WIDTH[accessor["type"]]
+        stride = _n(view.get("byteStride", 0), "byteStride") or element
+        need = _n(accessor.get("byteOffset", 0), "byteOffset") + stride * (count - 1) + element
+        if need > _n(view["byteLength"], "byteLength"):
             raise InvalidMeshError(
                 f"a glTF accessor declares {count} elements ({need} bytes), more than its buffer view holds"
                 f" ({view['byteLength']} bytes): the file is corrupt"
@@ -206,23 +223,55 @@ def _check_views(doc: dict, buffers: list[bytes]) -> None:
 
 
 def _check_counts(doc: dict, budget: Budget) -> None:
-    """Vertices and faces of the whole scene, each mesh counted once per node instance, within budget."""
+    """Declared sizes before anything is built: nodes, accessors and primitives, their types, and the
+    meshes, vertices and faces of the whole scene, each mesh counted once per node instance."""
     accessors = doc.get("accessors", [])
+    _check_declared(doc)
     per_mesh = []
-    for mesh in doc.get("meshes", []):
-        v = f = 0
+    for mesh in doc["meshes"]:
+        total = graph.Totals()
         for primitive in mesh.get("primitives", []):
-            n = int(accessors[int(primitive["attributes"]["POSITION"])]["count"])
-            v += n
-            f += (int(accessors[int(primitive["indices"])]["count"]) if "indices" in primitive else n) // 3
-        per_mesh.append((v, f))
+            total = total + _primitive(primitive, accessors)
+        per_mesh.append(total)
     instances = _instances(doc)
-    vertices = sum(instances[i] * per_mesh[int(node["mesh"])][0] for i, node in _mesh_nodes(doc))
-    faces = sum(instances[i] * per_mesh[int(node["mesh"])][1] for i, node in _mesh_nodes(doc))
-    if max(vertices, faces) > MAX_INSTANCES:
-        raise InvalidMeshError(f"the glTF scene expands to {vertices} vertices through its node instances")
-    budget.vertices(vertices, "the glTF scene (each mesh counted once per node that places it)")
-    budget.faces(faces, "the glTF scene (each mesh counted once per node that places it)")
+    total = graph.Totals()
+    for i, node in _mesh_nodes(doc):
+        m = per_mesh[_n(node["mesh"], "mesh index")]
+        total = total + graph.Totals(
+            instances[i] * m.placements, instances[i] * m.vertices, instances[i] * m.faces
+        )
+    graph.check(total, "glTF scene", budget)
+
+
+def _check_declared(doc: dict) -> None:
+    """Nodes, accessors and primitives a document declares, before anything is read from its buffers."""
+    graph.check_declared(len(doc.get("nodes", [])), "nodes", "glTF file")
+    graph.check_declared(len(doc.get("accessors", [])), "accessors", "glTF file")
+    graph.check_declared(sum(len(m.get("primitives", [])) for m in doc["meshes"]), "primitives", "glTF file")
+
+
+def _primitive(primitive: dict, accessors: list) -> graph.Totals:
+    """One primitive's declared vertices and faces; its POSITION and index accessors of the right types."""
+    position = accessors[_n(primitive["attributes"]["POSITION"], "POSITION accessor index")]
+    if position["type"] != "VEC3":
+        raise InvalidMeshError(
+            f"a glTF POSITION accessor is {str(position['type'])[:10]}, not VEC3: the file is corrupt"
+        )
+    n = _n(position["count"], "accessor count")
+    if "indices" in primitive:
+        index = accessors[_n(primitive["indices"], "indices accessor index")]
+        kind = _n(index["componentType"], "accessor componentType")
+        if kind not in _INDEX_TYPES or index["type"] != "SCALAR":
+            raise InvalidMeshError(
+                f"a glTF index accessor holds {_NAMES.get(kind, kind)} {str(index['type'])[:10]} values:"
+                " indices must be unsigned integers (SCALAR UNSIGNED_BYTE, SHORT or INT); the file is corrupt"
+            )
+        n_index = _n(index["count"], "accessor count")
+    else:
+        n_index = n
+    mode = _n(primitive.get("mode", 4), "primitive mode")
+    faces = n_index // 3 if mode == 4 else max(n_index - 2, 0) if mode in (5, 6) else 0
+    return graph.Totals(int(faces > 0), n, faces)
 
 
 def _mesh_nodes(doc: dict) -> list[tuple[int, dict]]:
@@ -235,14 +284,14 @@ def _instances(doc: dict) -> list[int]:
     nodes = doc.get("nodes", [])
     scenes = doc.get("scenes", [])
     if scenes:
-        roots = [int(r) for r in scenes[int(doc.get("scene", 0))].get("nodes", [])]
+        roots = [_n(r, "node index") for r in scenes[_n(doc.get("scene", 0), "scene index")].get("nodes", [])]
     else:  # no scene: every node no one parents is a root
-        children = {int(c) for node in nodes for c in node.get("children", [])}
+        children = {_n(c, "node index") for node in nodes for c in node.get("children", [])}
         roots = [i for i in range(len(nodes)) if i not in children]
     parents = [0] * len(nodes)
     for node in nodes:
         for c in node.get("children", []):
-            parents[int(c)] += 1
+            parents[_n(c, "node index")] += 1
     count = [0] * len(nodes)
     for r in roots:
         count[r] += 1

@@ -1,24 +1,11 @@
-"""3MF (3D printing), COLLADA (.dae) through trimesh; raw Draco (.drc) through DracoPy."""
+"""Raw Draco (.drc) through DracoPy."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from app.core.formats.containers import check_members, open_zip
-from app.core.formats.scene import load_with_trimesh, short
+from app.core.formats.scene import short
 from app.core.meshdata import Budget, InvalidMeshError
-
-
-def read_3mf(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
-    """3MF: a zip of XML; every build item with its transform (trimesh, which needs lxml and networkx)."""
-    with open_zip(data, budget, "3MF") as archive:  # refuse a zip bomb before trimesh unpacks it
-        check_members(archive, "3MF")
-    return load_with_trimesh(data, "3mf", "3MF", budget)
-
-
-def read_dae(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
-    """COLLADA: the visual scene's triangle geometry with node transforms (trimesh + pycollada)."""
-    return load_with_trimesh(data, "dae", "COLLADA", budget)
 
 
 def read_drc(data: bytes, budget: Budget) -> tuple[np.ndarray, np.ndarray]:

@@ -27,16 +27,32 @@ def load_with_trimesh(
 def scene_arrays(loaded: object, what: str, budget: Budget) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(loaded, trimesh.Scene):
         _check_instances(loaded, what, budget)
-        # dump() places a copy of each geometry at every node that refers to it, transforms applied
-        geometry = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh) and len(g.faces)]
-        if not geometry:
-            raise InvalidMeshError(f"the {what} file holds no triangle mesh (only points, lines or nothing)")
-        loaded = trimesh.util.concatenate(geometry) if len(geometry) > 1 else geometry[0]
+        return _flatten(loaded, what)
     if isinstance(loaded, trimesh.PointCloud):
         raise InvalidMeshError("the mesh has no faces (a point cloud is not a surface)")
     if not isinstance(loaded, trimesh.Trimesh):
         raise InvalidMeshError(f"the {what} file holds no triangle mesh")
     return np.asarray(loaded.vertices, dtype=np.float64), np.asarray(loaded.faces, dtype=np.int64)
+
+
+def _flatten(scene: trimesh.Scene, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """Every triangle mesh at every node that places it, its transform applied, as one pair of arrays.
+
+    What Scene.dump() + concatenate give, without a Trimesh copy per placement (2,187 placements of a
+    tetrahedron: 5 s of copying and re-processing, for 35 kB of arrays)."""
+    vertices, faces, offset = [], [], 0
+    for node in scene.graph.nodes_geometry:
+        transform, name = scene.graph[node]
+        geometry = scene.geometry.get(name)
+        if not isinstance(geometry, trimesh.Trimesh) or not len(geometry.faces):
+            continue
+        v = np.asarray(geometry.vertices, dtype=np.float64)
+        vertices.append(v @ transform[:3, :3].T + transform[:3, 3])
+        faces.append(np.asarray(geometry.faces, dtype=np.int64) + offset)
+        offset += len(v)
+    if not faces:
+        raise InvalidMeshError(f"the {what} file holds no triangle mesh (only points, lines or nothing)")
+    return np.concatenate(vertices), np.concatenate(faces)
 
 
 def short(exc: Exception) -> str:

@@ -1,0 +1,73 @@
+"""How rough a surface is at its own sampling: the measure that decides how much smoothing it needs.
+
+Noise moves each vertex off the surface independently of its neighbours; shape moves a vertex together
+with its neighbours. So the normal displacement of a vertex from the average of its neighbours,
+δ_i = n_i · (x_i - (W x)_i), is smooth over a smooth surface whatever its curvature (it follows the
+mean curvature, κ h² / 4 at edge length h), and jumps from vertex to vertex under noise or on the
+facets that a coarse mesh's subdivision leaves. The roughness is what is left of δ once its own
+neighbourhood average is taken away, ρ_i = |δ_i - (W δ)_i|, as a multiple of the mesh's median edge
+length; its median over the vertices ignores the few vertices of a small sharp part (an ear, a
+fingertip) that a clean surface also has.
+
+The measure is scale-free and unchanged by rigid motion and vertex order (W is the capped-area
+averaging of app.core.smoothing, built from face areas only).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from app.core.mesh import Mesh
+from app.core.smoothing import LAMBDA, MU, averaging_operator
+
+
+def vertex_normals(mesh: Mesh) -> np.ndarray:
+    """(n, 3) unit area-weighted vertex normals (zero for a vertex without faces)."""
+    v, f = mesh.vertices, mesh.faces
+    cross = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # (f, 3), |.| = 2 area
+    normals = np.zeros_like(v)
+    for corner in range(3):
+        np.add.at(normals, f[:, corner], cross)
+    norm = np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.divide(normals, norm, out=np.zeros_like(normals), where=norm > 0)
+
+
+def median_edge_length(mesh: Mesh) -> float:
+    v, f = mesh.vertices, mesh.faces
+    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    return float(np.median(np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)))
+
+
+def roughness(mesh: Mesh, averaging: tuple[sp.csr_matrix, np.ndarray] | None = None) -> float:
+    """Median |δ - W δ| / median edge length (module docstring); 0 for a mesh without faces.
+
+    averaging : (W (n, n), has (n,) bool) as averaging_operator(mesh, "capped-area") gives; a caller
+    that smooths with a fixed W (taubin) passes it, so the measure follows the same neighbourhoods.
+    """
+    if len(mesh.faces) == 0:
+        return 0.0
+    w, has = averaging if averaging is not None else averaging_operator(mesh, "capped-area")
+    x = mesh.vertices
+    delta = np.einsum("ij,ij->i", vertex_normals(mesh), x - w @ x)  # (n,)
+    rough = np.abs(delta - w @ delta)[has]
+    edge = median_edge_length(mesh)
+    if edge <= 0 or rough.size == 0:
+        return 0.0
+    return float(np.median(rough) / edge)
+
+
+def smooth_until(mesh: Mesh, target: float, max_steps: int, weights: str = "capped-area",
+                 min_steps: int = 0) -> tuple[Mesh, int]:
+    """Taubin λ|μ pairs (app.core.smoothing.taubin's steps, W from the input): at least min_steps, then
+    until roughness <= target or max_steps steps are done: each mesh smoothed only as much as its own
+    noise needs. vertices (n, 3) move, faces (f, 3) are kept. Returns the mesh and the steps taken."""
+    w, has = averaging_operator(mesh, weights)
+    x = mesh.vertices.copy()
+    steps = 0
+    while steps + 2 <= max(max_steps, min_steps) and (
+            steps < min_steps or roughness(Mesh(x, mesh.faces), (w, has)) > target):
+        for s in (LAMBDA, MU):
+            x = x + s * np.where(has[:, None], w @ x - x, 0.0)  # (n, 3)
+        steps += 2
+    return (Mesh(x, mesh.faces) if steps else mesh), steps
