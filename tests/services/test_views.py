@@ -181,3 +181,25 @@ def test_a_busy_pool_is_not_kept_as_the_models_failure(served, monkeypatch):
     monkeypatch.setattr(pool, "run", real)
     again = client.get(f"/models/{model['id']}/thumbnail.png", params={"size": 128})
     assert again.status_code == 200 and views.PLACEHOLDER_HEADER not in again.headers
+
+
+def _ribbon(n: int, width: float, length: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """A strip one triangle wide: (2n + 2, 3) vertices, (2n, 3) faces."""
+    x = np.linspace(0.0, length, n + 1)
+    v = np.concatenate([np.stack([x, 0 * x, 0 * x], 1), np.stack([x, 0 * x + width, 0 * x], 1)])
+    i = np.arange(n)
+    f = np.concatenate([np.stack([i, i + 1, n + 1 + i], 1), np.stack([i + 1, n + 2 + i, n + 1 + i], 1)])
+    return v, f
+
+
+def test_previews_of_a_ribbon_and_of_slivers_are_never_a_500(served):
+    client, _ = served
+    v, f = _ribbon(10_000, 0.01)  # 20,000 triangles: once a 500 (no pixel centre inside any)
+    r = client.post("/web/preview.png", files={"file": ("ribbon.obj", obj_text(v, f))})
+    assert r.status_code in (200, 422), r.text[:300]
+    n = 4_000
+    a = np.random.default_rng(1).normal(size=(n, 3)) * 1e-3
+    slivers = np.concatenate([a, a + [1.0, 1.0, 0.3], a + [1.0001, 1.0, 0.3]])
+    faces = np.arange(3 * n).reshape(3, n).T
+    r = client.post("/web/preview.png", files={"file": ("slivers.obj", obj_text(slivers, faces))})
+    assert r.status_code == 422, r.text[:300]
