@@ -13,7 +13,7 @@ from fastapi import FastAPI, Request
 from fastapi.middleware.cors import CORSMiddleware
 
 from app.api import errors
-from app.api.client_budget import ClientBudget
+from app.api.client_budget import ClientBudget, document_client_bound
 from app.api.deps import Runtime
 from app.api.limits import GuardUploads, RefuseEncodedBodies, check_data_dir
 from app.api.routes import admin, docs, explain, health, jobs, labels, models, search, web
@@ -104,7 +104,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     def openapi() -> dict:
         if app.openapi_schema is None:
-            app.openapi_schema = document_refusals(generate())
+            app.openapi_schema = document_client_bound(document_refusals(generate()))
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]

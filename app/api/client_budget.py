@@ -43,6 +43,21 @@ def is_costly(scope: dict) -> bool:
     return bool(pattern and pattern.match(scope.get("path", "")))
 
 
+def document_client_bound(schema: dict) -> dict:
+    """The OpenAPI schema with the 429 this bound answers on every costly operation."""
+    refusal = {
+        "description": "Too many requests: this client's costly requests in flight, or its share of a"
+        " queue, are used up; retry after Retry-After seconds",
+        "headers": {"Retry-After": {"schema": {"type": "integer"}}},
+        "content": {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorResponse"}}},
+    }
+    for path, operations in schema.get("paths", {}).items():
+        for method, operation in operations.items():
+            if is_costly({"method": method.upper(), "path": path}):
+                operation.setdefault("responses", {}).setdefault("429", refusal)
+    return schema
+
+
 class ClientBudget:
     """ASGI middleware: names each request's client (services/clients.py, read by the budgets and the
     ingest queue) and lets one client have at most `max_requests` costly requests in flight; the next

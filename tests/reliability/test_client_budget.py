@@ -171,3 +171,24 @@ def test_a_real_server_answers_a_client_over_its_queue_share_with_429(data_dir, 
     assert codes == [200, 200, 429, 429], [r.text[:200] for r in answers]
     assert all(r.json()["error"]["code"] == "too_many_requests" and r.headers["retry-after"] for r in refused)
     assert all("already wait" in r.json()["error"]["message"] for r in refused)
+
+
+def test_the_schema_lists_the_429_on_every_costly_operation_only(settings):
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+
+    with TestClient(create_app(settings)) as client:
+        paths = client.get("/openapi.json").json()["paths"]
+    costly = [
+        ("/search", "post"),
+        ("/models", "post"),
+        ("/explain", "post"),
+        ("/models/{model_id}/explain", "get"),
+        ("/models/{model_id}/thumbnail.png", "get"),
+    ]
+    for path, method in costly:
+        answer = paths[path][method]["responses"]["429"]
+        assert "Retry-After" in answer["headers"], (path, method)
+    assert "429" not in paths["/models"]["get"]["responses"]
+    assert "429" not in paths["/models/{model_id}"]["get"]["responses"]
