@@ -77,6 +77,14 @@ class EncodeSettings(BaseModel):
         return EncodeParams(**self.model_dump())  # normalize keeps its default (True)
 
 
+class BudgetSettings(BaseModel):
+    """One kind of costly work's budget (docs/reliability.md, "Budgets"): SHAPEBAG_EXPLAIN_BUDGET__QUEUE=2."""
+
+    concurrency: int = Field(default=1, ge=1)  # requests of this kind running at once
+    queue: int = Field(default=8, ge=0)  # waiting beyond them: 503 busy
+    timeout_s: float = Field(default=30.0, gt=0)  # deadline, waiting included: 504, process replaced
+
+
 class StorageSettings(BaseModel):
     """Room on the data directory (SHAPEBAG_STORAGE__MIN_FREE_MB=1024 ...): under the floor, or past the
     quota, writes answer 507 before the disk (and SQLite) fills; reads and DELETE keep working."""
@@ -96,8 +104,15 @@ class Settings(BaseSettings):
     host: str = "127.0.0.1"
     port: int = 8000
     workers: int = Field(default_factory=lambda: os.cpu_count() or 1, ge=0)  # embedded ingestion processes
-    search_processes: int = Field(default=2, ge=1)  # pool describing query meshes, one request each
-    search_queue: int = Field(default=8, ge=0)  # requests waiting for a busy pool before 503
+    pool_processes: int = Field(default=3, ge=1)  # shared by the budgets below, one request each
+    search_processes: int = Field(default=2, ge=1)  # query descriptions at once (one process kept for them)
+    search_queue: int = Field(default=8, ge=0)  # query descriptions waiting before 503
+    check_budget: BudgetSettings = Field(default_factory=lambda: BudgetSettings(timeout_s=30.0))
+    explain_budget: BudgetSettings = Field(default_factory=lambda: BudgetSettings(queue=4, timeout_s=60.0))
+    render_budget: BudgetSettings = Field(default_factory=lambda: BudgetSettings(timeout_s=20.0))
+    client_requests: int = Field(default=8, ge=1)  # costly requests one client has in flight; more: 429
+    ingest_timeout_s: float = Field(default=120.0, gt=0)  # wall clock of one ingest job; then failed
+    worker_nice: int = Field(default=10, ge=0, le=19)  # ingestion yields the cores to searches
     worker_memory_mb: int = Field(default=4096, ge=0)  # RLIMIT_AS of worker and pool processes; 0: none
     upload_timeout_s: float = Field(default=30.0, gt=0)  # no body bytes for this long: 408
     max_concurrent_uploads: int = Field(default=16, ge=1)  # request bodies read at once; more: 503

@@ -13,16 +13,16 @@ from fastapi import FastAPI, Request
 from fastapi.middleware.cors import CORSMiddleware
 
 from app.api import errors
+from app.api.client_budget import ClientBudget, document_client_bound
 from app.api.deps import Runtime
 from app.api.limits import GuardUploads, RefuseEncodedBodies, check_data_dir
 from app.api.routes import admin, docs, explain, health, jobs, labels, models, search, web
 from app.api.security import SecureEdge, document_refusals
 from app.config import Settings
-from app.services import vocabularies
+from app.services import query_pool, vocabularies
 from app.services.context import ServiceContext, open_context
 from app.services.live_index import LiveIndex
 from app.services.metrics import Metrics
-from app.services.query_pool import QueryDescriber
 from app.services.sweep import sweep_temp_files
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
@@ -47,14 +47,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         await asyncio.to_thread(live.refresh)
         workers = WorkerPool(ctx.settings, ctx.settings.workers)
         workers.start()
-        describer = QueryDescriber(
-            settings.search_processes,
-            settings.describe.params(),
-            settings.max_vertices,
-            settings.describe_timeout_s,
-            settings.worker_memory_mb,
-            settings.search_queue,
-        )
+        describer = query_pool.from_settings(settings)
         await asyncio.to_thread(metrics.skip_history, ctx)
         if settings.warm_up:  # in the background: startup does not wait for it
             asyncio.get_running_loop().run_in_executor(None, describer.warm_up)
@@ -85,6 +78,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(  # 503 past N bodies being read at once, 408 after a stall
         GuardUploads, max_concurrent=settings.max_concurrent_uploads, timeout_s=settings.upload_timeout_s
     )
+    # outside the body guards (a refused client takes no upload slot), inside the edge (its 429s get the
+    # security headers): names each request's client for the layers inside, answers its 429s
+    tokens = {"api": settings.api_token, "admin": settings.admin_token}
+    app.add_middleware(ClientBudget, max_requests=settings.client_requests, tokens=tokens)
     if settings.cors_origins:  # closed unless configured
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "POST"])
     # outside the others: its headers go on their refusals too, and a foreign Origin is refused first
@@ -107,7 +104,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     def openapi() -> dict:
         if app.openapi_schema is None:
-            app.openapi_schema = document_refusals(generate())
+            app.openapi_schema = document_client_bound(document_refusals(generate()))
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]

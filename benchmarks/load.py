@@ -6,7 +6,8 @@
 Every upload is a new mesh (a perturbed copy of a corpus mesh), so it is stored and ingested: the
 workers compete with the query pool for the same cores. Prints requests, errors and p50/p99 latency per
 kind and writes results/load.json. An error is any transport failure or non-2xx answer, except a 503
-with Retry-After (admission control shedding load: counted as `shed`, and the client waits as told).
+or 429 with Retry-After (admission control shedding load, or the bound per client: counted as `shed`,
+and the client waits as told).
 
 It also prints the peak RSS (VmHWM, sampled every 0.25 s so restarted processes count too) of the API
 process and of each worker / query-pool process, first under the hostile phase (every case of the
@@ -106,7 +107,7 @@ async def drive(
                     detail = f"{r.status_code} {r.text[:120]}"
                 except httpx.HTTPError as exc:
                     ok, detail, r = False, f"{type(exc).__name__}: {exc}", None
-                if r is not None and r.status_code == 503 and "retry-after" in r.headers:
+                if r is not None and r.status_code in (429, 503) and "retry-after" in r.headers:
                     shed[kind] += 1  # admission control: not an error; back off as the server asks
                     # + 0.5 s: past uvicorn's 5 s keep-alive, so a connection it is closing is never reused
                     await asyncio.sleep(float(r.headers["retry-after"]) + 0.5)
@@ -360,7 +361,8 @@ def main(argv: list[str] | None = None) -> int:
         if base is None:
             data_dir = Path(tmp) / "data"
             seed_data_dir(data_dir, files)
-            proc, base = serve(data_dir, args.workers)
+            # every client here connects from 127.0.0.1: one client to the server's per-client bound
+            proc, base = serve(data_dir, args.workers, {"SHAPEBAG_CLIENT_REQUESTS": str(2 * args.clients)})
             pid = proc.pid
         try:
             if not args.no_hostile:

@@ -179,19 +179,23 @@ class GuardUploads:
             done_reading()
 
     async def _drain(self, receive) -> bool:
-        """Read and discard the body; True if it ended within DRAIN_BYTES and the time limit."""
-        size = 0
-        while size <= self.DRAIN_BYTES:
-            try:
-                message = await asyncio.wait_for(receive(), self.timeout_s)
-            except TimeoutError:
-                return False
-            if message["type"] != "http.request":
-                return False
-            size += len(message.get("body", b""))
-            if not message.get("more_body", False):
-                return size <= self.DRAIN_BYTES
-        return False
+        return await drain(receive, self.timeout_s, self.DRAIN_BYTES)
+
+
+async def drain(receive, timeout_s: float, limit: int) -> bool:
+    """Read and discard a request body; True if it ended within `limit` bytes and the time limit."""
+    size = 0
+    while size <= limit:
+        try:
+            message = await asyncio.wait_for(receive(), timeout_s)
+        except TimeoutError:
+            return False
+        if message["type"] != "http.request":
+            return False
+        size += len(message.get("body", b""))
+        if not message.get("more_body", False):
+            return size <= limit
+    return False
 
 
 def check_data_dir(data_dir: Path) -> None:

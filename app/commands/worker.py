@@ -49,9 +49,8 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
         while not stop.wait(1.0):
-            if pool.alive() < args.processes:
-                print("shapebag worker: a worker process died; stopping")
-                break
+            if pool.replace_dead():  # e.g. one ended past an ingest job's time limit
+                print("shapebag worker: a worker process died; started a new one")
     except KeyboardInterrupt:
         pass
     pool.stop()

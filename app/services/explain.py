@@ -2,9 +2,10 @@
 
 The numbers come from app.core.explain; this module joins them with storage: the cached description
 (.npz, no eigen-solve again), the active vocabulary of the live index, and the canonical-resolution
-geometry the words live on. That geometry is recomputed from the stored mesh by the same resolution
-policy as describe() (decimation and subdivision are deterministic), in a query-pool process: the API
-process never decodes a mesh. The vertex counts are compared, so a description made under other
+geometry the words live on. That geometry is kept at ingest (services/views.py); for a model ingested
+before, it is recomputed once from the stored mesh by the same resolution policy as describe()
+(decimation and subdivision are deterministic), in a query-pool process: the API process never decodes
+a mesh. The vertex counts are compared, so a description made under other
 settings is refused rather than coloured wrongly.
 """
 
@@ -60,10 +61,11 @@ class Explanation:
 
 
 def _canonical(mesh: Mesh, params: DescribeParams) -> Geometry:
-    return _geometry(canonical_mesh(mesh, params))
+    return from_canonical(canonical_mesh(mesh, params))
 
 
-def _geometry(fine: Mesh) -> Geometry:
+def from_canonical(fine: Mesh) -> Geometry:
+    """The explain view of canonical_mesh(mesh, params): kept at ingest (services/views.py)."""
     # centred and turned as the thumbnails are (upright, largest silhouette facing the camera): a viewer
     # opens on the same picture as the card it came from
     v = fine.vertices.astype(np.float64)
@@ -86,7 +88,7 @@ def query_geometry(
     """An uploaded query: its description and its canonical geometry (one load, as /search loads it)."""
     mesh = load_upload(data, file_type, max_vertices)
     fine = canonical_mesh(mesh, params)
-    return describe_canonical(fine, mesh.n_vertices, params), _geometry(fine)
+    return describe_canonical(fine, mesh.n_vertices, params), from_canonical(fine)
 
 
 # ---- in the API process (threads) -------------------------------------------------------------------------

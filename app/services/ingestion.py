@@ -7,8 +7,10 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from app.core.mesh import detect_format, load_mesh
-from app.core.pipeline import describe
+from app.core.mesh import Mesh, detect_format, load_mesh
+from app.core.pipeline import DescribeParams, ShapeDescription, canonical_mesh, describe_canonical
+from app.services import views
+from app.services.clients import current_client
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError, QueueFullError
 from app.services.metadata import check_metadata
@@ -67,7 +69,7 @@ def submit(
                 ctx.blobs.mesh_path(digest, file_type).unlink(missing_ok=True)
             ctx.blobs.ensure_mesh(data, digest, existing.file_type, conn)
             models_repo.set_queued(conn, existing.id)
-            job_id = jobs_repo.enqueue(conn, "ingest", model_id=existing.id)
+            job_id = jobs_repo.enqueue(conn, "ingest", model_id=existing.id, client=current_client())
             model = models_repo.get(conn, existing.id)
             assert model is not None
             return Submitted(model, job_id, False)
@@ -81,10 +83,20 @@ def submit(
             file_type=file_type,
             size_bytes=len(data),
         )
-        job_id = jobs_repo.enqueue(conn, "ingest", model_id=model_id)
+        job_id = jobs_repo.enqueue(conn, "ingest", model_id=model_id, client=current_client())
         model = models_repo.get(conn, model_id)
     assert model is not None
     return Submitted(model, job_id, True)
+
+
+def describe_and_view(mesh: Mesh, params: DescribeParams) -> tuple[ShapeDescription, Mesh]:
+    """describe(mesh, params) and the canonical mesh it was made on (the explain view's), resampled once."""
+    t = time.perf_counter()
+    fine = canonical_mesh(mesh, params)
+    canonical_s = time.perf_counter() - t
+    description = describe_canonical(fine, mesh.n_vertices, params)
+    description.seconds["resample"] = description.seconds.get("resample", 0.0) + canonical_s
+    return description, fine
 
 
 def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
@@ -103,9 +115,10 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
     data = ctx.blobs.mesh_path(model.sha256, model.file_type).read_bytes()
     mesh = load_mesh(data, model.file_type, max_vertices=ctx.settings.max_vertices)
     timings["load"] = time.perf_counter() - t
-    description = describe(mesh, ctx.settings.describe.params())
+    description, fine = describe_and_view(mesh, ctx.settings.describe.params())
     timings.update({f"describe.{k}": v for k, v in description.seconds.items()})
     ctx.blobs.put_description(model.id, description.save)
+    views.save_geometry(ctx, model.id, fine)  # what /explain shows, kept now rather than per view
     for _ in range(5):  # encode with the active version; redo if a swap lands meanwhile
         t = time.perf_counter()
         with ctx.db.read() as conn:

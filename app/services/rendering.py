@@ -13,7 +13,7 @@ from app.core.mesh import InvalidMeshError, Mesh, load_mesh
 from app.core.resolution import simplify
 from app.services.errors import InvalidInputError, NotFoundError
 from app.services.mesh_policy import load_upload
-from app.services.thumbnails import render_png
+from app.services.thumbnails import RenderTooCostlyError, render_png
 
 PREVIEW_SIZE = 256
 THUMBNAIL_SIZES = (128, 256, 512)
@@ -31,7 +31,10 @@ def check_size(size: int) -> int:
 def _png(mesh: Mesh, size: int) -> bytes:
     if mesh.n_vertices > RENDER_MAX_VERTICES:
         mesh = simplify(mesh, RENDER_MAX_VERTICES)
-    return render_png(mesh.vertices, mesh.faces, size)
+    try:
+        return render_png(mesh.vertices, mesh.faces, size)
+    except RenderTooCostlyError as exc:  # the mesh's, not the server's: 422 (a kept placeholder for a model)
+        raise InvalidInputError(f"the mesh cannot be rendered: {exc}") from exc
 
 
 def render_upload(data: bytes, file_type: str, max_vertices: int, size: int = PREVIEW_SIZE) -> bytes:

@@ -29,6 +29,13 @@ _KEY_LIGHT = np.array([-0.45, 0.65, 0.62])  # from the upper left, in view space
 _FILL_LIGHT = np.array([0.6, -0.2, 0.5])
 _MARGIN = 0.06  # fraction of the frame left free on each side
 _MAX_CANDIDATES = 4_000_000  # candidate pixels tested per batch (bounds memory to ~100 MB)
+# candidate pixels in all (the sum of the triangles' boxes), counted before any is tested: slivers
+# spanning the frame cost a box each (20k of them took minutes); a few seconds of work at most
+MAX_TOTAL_CANDIDATES = 150_000_000
+
+
+class RenderTooCostlyError(ValueError):
+    """The mesh's triangles cover more candidate pixels than a thumbnail may test."""
 
 
 def render_png(
@@ -128,6 +135,12 @@ def _rasterise(
     live = (np.abs(area2) > 1e-12) & (w > 0) & (h > 0)
     # bucket key: box width and height, exact up to 8 pixels, then rounded up to a power of two
     kind = _size_class(w) * 4096 + _size_class(h)
+    total = int((_size_class(w[live]) * _size_class(h[live])).sum())
+    if total > MAX_TOTAL_CANDIDATES:
+        raise RenderTooCostlyError(
+            f"its triangles cover {total:,} candidate pixels, more than the {MAX_TOTAL_CANDIDATES:,} a"
+            " thumbnail may test (long slivers across the frame)"
+        )
 
     out_pix, out_face, out_bary, out_key = [], [], [], []
     for key in np.unique(kind[live]):
@@ -157,7 +170,7 @@ def _rasterise(
             out_face.append(tf)
             out_bary.append(bary)
             out_key.append(-z)
-    if not out_pix:
+    if not out_pix or not sum(len(p) for p in out_pix):  # no pixel centre inside any triangle (needles)
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
     pix = np.concatenate(out_pix)
     face = np.concatenate(out_face)

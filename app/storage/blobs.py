@@ -69,6 +69,18 @@ class BlobStore:
     def thumbnail_path(self, model_id: int, size: int) -> Path:
         return self.root / "thumbnails" / f"{model_id}-{size}.png"
 
+    def view_path(self, model_id: int, name: str) -> Path:
+        """views/<model id>.<name>: what a model needs to be viewed (its explain geometry), or the
+        stored reason it could not be made (`<what>.failed`). A cache of this host's, like thumbnails."""
+        return self.root / "views" / f"{model_id}.{name}"
+
+    def delete_views(self, model_id: int) -> None:
+        """The model's cached thumbnails, view files and stored view failures."""
+        for thumb in (self.root / "thumbnails").glob(f"{model_id}-*.png"):
+            thumb.unlink(missing_ok=True)
+        for view in (self.root / "views").glob(f"{model_id}.*"):
+            view.unlink(missing_ok=True)
+
     def ensure_mesh(self, data: bytes, sha256: str, file_type: str, conn: Any = None) -> Path:
         """The mesh file of `data`, written again if a delete removed it meanwhile (call under the
         database write lock: deletes remove mesh files under it, see hide_mesh). `conn`: that write
@@ -108,10 +120,11 @@ class BlobStore:
         return trash
 
     def model_bytes(self, model_id: int, sha256: str, file_type: str) -> int:
-        """Bytes one model holds here: its mesh file, description and cached thumbnails (this host's
-        files only: the database backend's fetch-on-read would write to answer)."""
+        """Bytes one model holds here: its mesh file, description, cached thumbnails and kept views (this
+        host's files only: the database backend's fetch-on-read would write to answer)."""
         paths = [BlobStore.mesh_path(self, sha256, file_type), BlobStore.description_path(self, model_id)]
         paths += (self.root / "thumbnails").glob(f"{model_id}-*.png")
+        paths += (self.root / "views").glob(f"{model_id}.*")
         total = 0
         for path in paths:
             try:
@@ -129,5 +142,4 @@ class BlobStore:
         if sha256 is not None:
             self.mesh_path(sha256, file_type).unlink(missing_ok=True)
         self.description_path(model_id).unlink(missing_ok=True)
-        for thumb in (self.root / "thumbnails").glob(f"{model_id}-*.png"):
-            thumb.unlink(missing_ok=True)
+        self.delete_views(model_id)

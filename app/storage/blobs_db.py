@@ -125,8 +125,7 @@ class DatabaseBlobStore(BlobStore):
         if sha256 is not None:
             super().mesh_path(sha256, file_type).unlink(missing_ok=True)
         super().description_path(model_id).unlink(missing_ok=True)
-        for thumb in (self.root / "thumbnails").glob(f"{model_id}-*.png"):
-            thumb.unlink(missing_ok=True)
+        self.delete_views(model_id)
 
     def _prefix(self, directory: Path) -> str:
         return directory.resolve().relative_to(self.root.resolve()).as_posix() + "/"

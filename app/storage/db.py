@@ -90,6 +90,12 @@ MIGRATIONS: list[str] = [
         model_id INTEGER NOT NULL
     );
     """,
+    # 4: who each job is for (services/clients.py: 'token:api', 'addr:10.0.0.7'), so the queue can
+    # serve clients in turn (jobs.claim)
+    """
+    ALTER TABLE jobs ADD COLUMN client TEXT NOT NULL DEFAULT '';
+    CREATE INDEX jobs_state_client ON jobs(state, client, id);
+    """,
 ]
 
 

@@ -1,9 +1,13 @@
 """Repository of jobs: a small queue in SQLite with leases.
 
-A worker claims the oldest runnable job in one transaction (SQLite: BEGIN IMMEDIATE; PostgreSQL: row
-locks, `FOR UPDATE SKIP LOCKED`, so claims on many hosts do not wait on each other) and holds it for
+A worker claims a runnable job in one transaction (SQLite: BEGIN IMMEDIATE; PostgreSQL: row locks,
+`FOR UPDATE SKIP LOCKED`, so claims on many hosts do not wait on each other) and holds it for
 `lease_seconds`; if the worker dies, the lease expires and another worker takes the job again,
 until `max_attempts` claims have been spent.
+
+Clients are served in turn: each job records the client it is for, and the next queued job is the
+oldest of the client with the fewest jobs running (then the oldest job). A client that queues 600
+uploads delays only itself: another client's upload waits for at most one job per worker.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ class JobRecord:
     updated_at: str
     payload: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    client: str = ""  # who it is for (services/clients.py); '' for maintenance jobs
 
 
 def _record(row: sqlite3.Row | None) -> JobRecord | None:
@@ -44,15 +49,19 @@ def _record(row: sqlite3.Row | None) -> JobRecord | None:
 
 
 def enqueue(
-    conn: sqlite3.Connection, kind: str, model_id: int | None = None, payload: dict | None = None
+    conn: sqlite3.Connection,
+    kind: str,
+    model_id: int | None = None,
+    payload: dict | None = None,
+    client: str = "",
 ) -> int:
     if kind not in KINDS:
         raise ValueError(f"unknown job kind {kind!r}")
     now = utcnow()
     cur = conn.execute(
-        "INSERT INTO jobs (kind, state, model_id, payload, created_at, updated_at)"
-        " VALUES (?, 'queued', ?, ?, ?, ?)",
-        (kind, model_id, json.dumps(payload or {}), now, now),
+        "INSERT INTO jobs (kind, state, model_id, payload, created_at, updated_at, client)"
+        " VALUES (?, 'queued', ?, ?, ?, ?, ?)",
+        (kind, model_id, json.dumps(payload or {}), now, now, client),
     )
     return int(cur.lastrowid or 0)
 
@@ -86,11 +95,12 @@ def claim(db: Database, worker: str, lease_seconds: float, max_attempts: int) ->
                     " WHERE id = ? AND status = 'queued'",
                     (reason, utcnow(), row["model_id"]),
                 )
-        row = conn.execute(
-            "SELECT * FROM jobs WHERE state = 'queued' OR (state = 'running' AND lease_until < ?)"
-            " ORDER BY id LIMIT 1" + db.skip_locked,
+        row = conn.execute(  # a dead worker's job first: it has waited longest
+            "SELECT * FROM jobs WHERE state = 'running' AND lease_until < ? ORDER BY id LIMIT 1"
+            + db.skip_locked,
             (now,),
         ).fetchone()
+        row = row or _next_in_turn(conn, db.skip_locked)
         if row is None:
             return None
         conn.execute(
@@ -100,6 +110,32 @@ def claim(db: Database, worker: str, lease_seconds: float, max_attempts: int) ->
             (now + lease_seconds, worker, utcnow(), row["id"]),
         )
         return get(conn, row["id"])
+
+
+# per client with queued jobs: its oldest, ordered by the client's running jobs, then age
+_TURNS = (
+    "SELECT q.first_id FROM"
+    " (SELECT client, MIN(id) AS first_id FROM jobs WHERE state = 'queued' GROUP BY client) AS q"
+    " LEFT JOIN (SELECT client, COUNT(*) AS n FROM jobs WHERE state = 'running' GROUP BY client) AS r"
+    " ON r.client = q.client"
+    " ORDER BY COALESCE(r.n, 0), q.first_id LIMIT ?"
+)
+TURN_CANDIDATES = 8
+
+
+def _next_in_turn(conn: sqlite3.Connection, skip_locked: str) -> sqlite3.Row | None:
+    """The next queued job, clients in turn. The aggregate takes no row locks (PostgreSQL refuses FOR
+    UPDATE with GROUP BY), so each candidate is locked on its own; one another worker holds is skipped."""
+    for (job_id,) in conn.execute(_TURNS, (TURN_CANDIDATES,)).fetchall():
+        row = conn.execute(
+            "SELECT * FROM jobs WHERE id = ? AND state = 'queued'" + skip_locked, (job_id,)
+        ).fetchone()
+        if row is not None:
+            return row
+    # every candidate taken meanwhile (many workers at once): the oldest job still free
+    return conn.execute(
+        "SELECT * FROM jobs WHERE state = 'queued' ORDER BY id LIMIT 1" + skip_locked
+    ).fetchone()
 
 
 def extend_lease(db: Database, job_id: int, worker: str, lease_seconds: float) -> bool:

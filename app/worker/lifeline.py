@@ -8,6 +8,7 @@ other platforms, spawning threads that end, and a parent that died before prctl 
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import logging
 import os
@@ -15,6 +16,8 @@ import resource
 import signal
 import sys
 import threading
+from collections.abc import Callable
+from typing import Any
 
 log = logging.getLogger(__name__)
 
@@ -59,3 +62,30 @@ def cap_memory(megabytes: int) -> None:
     if hard != resource.RLIM_INFINITY:
         limit = min(limit, hard)
     resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+
+
+def run_niced(nice: int, fn: Callable[..., Any], *args: Any) -> Any:
+    """fn(*args) at `nice` more CPU niceness, in a thread of its own; this process keeps its priority.
+
+    Linux gives each thread its own nice value, and an unprivileged process may raise it but never
+    lower it back: a pool process that serves both searches and renders runs the renders in a niced
+    thread, so the next search it serves still runs at full priority. Elsewhere (or nice <= 0): as is.
+    """
+    if nice <= 0 or not sys.platform.startswith("linux"):
+        return fn(*args)
+    outcome: dict[str, Any] = {}
+
+    def niced() -> None:
+        with contextlib.suppress(OSError):  # not permitted here: run at the usual priority
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
+        try:
+            outcome["value"] = fn(*args)
+        except BaseException as exc:  # re-raised in the caller's thread (MemoryError included)
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=niced, name="niced-call")
+    thread.start()
+    thread.join()
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["value"]

@@ -100,7 +100,8 @@ def worker_main(settings_json: str, name: str, stop: StopFlag, parent_pid: int) 
     from app.worker.runner import Worker
 
     ctx = open_context(settings)
-    Worker(ctx, name).run_forever(ParentWatch(stop, parent_pid))  # type: ignore[arg-type]
+    os.nice(settings.worker_nice)  # ingestion yields the cores to searches and uploads
+    Worker(ctx, name, hard_deadline=True).run_forever(ParentWatch(stop, parent_pid))  # type: ignore[arg-type]
 
 
 def process_name(prefix: str, slot: int) -> str:

@@ -17,6 +17,7 @@ from app.services.errors import InvalidInputError
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
 from app.storage.jobs import JobRecord
+from app.worker.deadline import JobTimeout, wall_clock_limit
 
 log = logging.getLogger(__name__)
 
@@ -29,9 +30,12 @@ def default_name() -> str:
 
 
 class Worker:
-    def __init__(self, ctx: ServiceContext, name: str | None = None) -> None:
+    def __init__(self, ctx: ServiceContext, name: str | None = None, hard_deadline: bool = False) -> None:
+        """hard_deadline: end this process when an ingest job cannot be stopped cleanly at its limit
+        (for processes a WorkerPool replaces; worker/deadline.py)."""
         self.ctx = ctx
         self.name = name or default_name()
+        self.hard_deadline = hard_deadline
         self._handlers: dict[str, Callable[[JobRecord, Callable[[], None]], object]] = {
             "ingest": lambda job, keep: ingestion.run_ingest(ctx, job),
             "rebuild_vocabulary": lambda job, keep: vocabularies.rebuild_vocabulary(
@@ -51,7 +55,9 @@ class Worker:
         keeper = threading.Thread(target=self._keep_lease, args=(job.id, stop), daemon=True)
         keeper.start()
         try:
-            self._handlers[job.kind](job, lambda: None)
+            self._run(job)
+        except JobTimeout:  # not retried: the same mesh would take as long again
+            self._fail(job, self._overrun(job))
         except PERMANENT as exc:
             self._fail(job, str(exc))
         except MemoryError:  # RLIMIT_AS (SHAPEBAG_WORKER_MEMORY_MB): the same input would hit it again
@@ -69,6 +75,21 @@ class Worker:
             stop.set()
             keeper.join()
         return job
+
+    def _run(self, job: JobRecord) -> None:
+        if job.kind != "ingest":  # maintenance jobs (vocabulary fits) may rightly take long
+            self._handlers[job.kind](job, lambda: None)
+            return
+        hard = (lambda: self._fail(job, self._overrun(job))) if self.hard_deadline else None
+        with wall_clock_limit(self.ctx.settings.ingest_timeout_s, on_hard=hard):
+            self._handlers[job.kind](job, lambda: None)
+
+    def _overrun(self, job: JobRecord) -> str:
+        limit = self.ctx.settings.ingest_timeout_s
+        return (
+            f"ingestion took longer than the limit of {limit:g} s (SHAPEBAG_INGEST_TIMEOUT_S): the mesh"
+            " is too costly to describe; send a simpler or smaller one"
+        )
 
     def _fail(self, job: JobRecord, reason: str) -> None:
         with self.ctx.db.write() as conn:

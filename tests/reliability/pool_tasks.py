@@ -20,3 +20,10 @@ def allocate(megabytes: int) -> int:
     """Touch `megabytes` of memory (what a decode bomb does); returns the bytes held."""
     block = bytearray(megabytes * 1024 * 1024)
     return len(block)
+
+
+def niceness() -> int:
+    """The CPU niceness of the thread running this call (Linux: per thread)."""
+    import threading
+
+    return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())

@@ -112,7 +112,7 @@ def test_killed_worker_job_completes_after_its_lease_with_exactly_one_model(tmp_
             job_id = _upload(http, path, label)["job_id"]
             env = env_for(data, SHAPEBAG_LEASE_SECONDS="2")
             barrier = tmp_path / "release-describe"  # the first worker's describe waits here, for ever
-            held = {**env, **hold("app.services.ingestion:describe", barrier)}
+            held = {**env, **hold("app.services.ingestion:describe_and_view", barrier)}
             workers.append(Proc(["worker"], held, tmp_path / "worker1.log"))
             wait_for(lambda: Path(f"{barrier}.entered").exists(), timeout_s=120)
             workers[0].kill9()  # mid-describe, for certain

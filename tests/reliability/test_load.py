@@ -23,8 +23,10 @@ def test_fifty_clients_mixed_load_without_errors(data_dir, corpus, tmp_path):
         tmp_path / "s.log",
         SHAPEBAG_WORKERS="1",
         SHAPEBAG_QUEUE_LIMIT="100000",
-        SHAPEBAG_SEARCH_QUEUE="64",
+        SHAPEBAG_SEARCH_QUEUE="128",  # one client may hold half a queue: 64, above the 50 clients
+        SHAPEBAG_CHECK_BUDGET__QUEUE="128",
         SHAPEBAG_MAX_CONCURRENT_UPLOADS="64",
+        SHAPEBAG_CLIENT_REQUESTS="64",  # the 50 clients share one address: one client to the server
     )
     try:
         meshes = Meshes([p for p, _ in corpus.files])

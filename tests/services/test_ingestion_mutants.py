@@ -237,7 +237,7 @@ def _fakes(ctx, monkeypatch):
             seen.on_encode()
             return np.full(3, self.record.id, np.float32)
 
-    monkeypatch.setattr(ingestion, "describe", describe)
+    monkeypatch.setattr(ingestion, "describe_and_view", lambda mesh, params: (describe(mesh, params), mesh))
 
     def load_vocabulary(c, record):
         assert c is ctx  # the versions live in this service's data directory

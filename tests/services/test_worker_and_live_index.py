@@ -39,7 +39,7 @@ def test_invalid_mesh_fails_at_once_and_transient_errors_retry(tmp_path, monkeyp
     def boom(*a, **k):
         raise OSError("disk hiccup")
 
-    monkeypatch.setattr(ingestion, "describe", boom)
+    monkeypatch.setattr(ingestion, "describe_and_view", boom)
     Worker(ctx, "w").run_once()
     assert _job(ctx, sub.job_id).state == "queued" and "disk hiccup" in _job(ctx, sub.job_id).error
     Worker(ctx, "w").run_once()

@@ -91,7 +91,7 @@ def test_a_job_past_the_worker_memory_cap_fails_once_with_the_reason(settings, c
     def too_big(*args, **kwargs):
         raise MemoryError
 
-    monkeypatch.setattr(ingestion, "describe", too_big)
+    monkeypatch.setattr(ingestion, "describe_and_view", too_big)
     Worker(ctx, "capped").run_forever(exit_when_idle=True)
     with ctx.db.read() as conn:
         job = jobs_repo.get(conn, sub.job_id)

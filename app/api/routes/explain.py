@@ -19,7 +19,7 @@ from app.api.limits import IdPath
 from app.api.routes.models import ERRORS
 from app.api.schemas import Explanation, ShapeExplained, WordContribution
 from app.api.uploads import multipart_body, read_form
-from app.services import catalog, explain
+from app.services import catalog, explain, views
 from app.services.errors import InvalidInputError
 from app.services.live_index import ActivePair
 
@@ -42,9 +42,7 @@ async def _stored(runtime: Runtime, pair: ActivePair, model_id: int) -> explain.
     ctx = runtime.ctx
     model = await run_in_threadpool(catalog.get_model, ctx, model_id)
     description = await run_in_threadpool(explain.stored_description, ctx, model)
-    path = str(ctx.blobs.mesh_path(model.sha256, model.file_type))
-    args = (path, model.file_type, ctx.settings.describe.params(), ctx.settings.max_vertices)
-    geometry = await runtime.describer.run(explain.stored_geometry, args, "reading the model's mesh")
+    geometry = await views.explain_geometry(ctx, runtime.describer, model)  # kept; computed once
     return explain.side(model, model.name, description, geometry, pair.vocabulary, pair.params)
 
 
@@ -79,7 +77,9 @@ async def explain_upload(request: Request, runtime: RuntimeDep) -> Explanation:
     pair = runtime.live.require()
     other = await _stored(runtime, pair, against)  # first: a wrong id fails before the costly part
     args = (data, limits.upload_format(filename), settings.describe.params(), settings.max_vertices)
-    description, geometry = await runtime.describer.run(explain.query_geometry, args, "explaining the query")
+    description, geometry = await runtime.describer.run(
+        explain.query_geometry, args, "explaining the query", kind="explain"
+    )
     shape = explain.side(None, filename, description, geometry, pair.vocabulary, pair.params)
     return to_response(explain.explain(pair.record.id, pair.vocabulary, shape, other))
 

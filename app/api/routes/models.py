@@ -24,7 +24,7 @@ from app.api.schemas import (
 )
 from app.api.space import RoomDep
 from app.api.uploads import multipart_body, read_form
-from app.services import catalog, ingestion, maintenance, metadata, rendering, search
+from app.services import catalog, ingestion, metadata, rendering, search, views
 from app.services.errors import InvalidInputError, NotFoundError
 
 router = APIRouter(prefix="/models", tags=["models"])
@@ -154,15 +154,19 @@ async def thumbnail(
         int, Query(description="pixels", json_schema_extra={"enum": list(rendering.THUMBNAIL_SIZES)})
     ] = rendering.PREVIEW_SIZE,
 ) -> Response:
-    """A server-side rendering of the stored mesh (cached under the data directory; 128, 256 or 512)."""
+    """A server-side rendering of the stored mesh (kept under the data directory; 128, 256 or 512).
+    A mesh that cannot be rendered gets a placeholder image, with the reason in X-Shapebag-Placeholder."""
     rendering.check_size(size)
     model = await run_in_threadpool(catalog.get_model, runtime.ctx, model_id)
-    path = await maintenance.thumbnail_file(runtime.ctx, runtime.describer, model, size)
-    return Response(
-        await run_in_threadpool(path.read_bytes),
-        media_type="image/png",
-        headers={"Cache-Control": "public, max-age=86400, immutable"},
-    )
+    png, failed = await views.thumbnail(runtime.ctx, runtime.describer, model, size)
+    headers = {"Cache-Control": "public, max-age=86400, immutable"}
+    if failed is not None:  # the reason in a header: ASCII only, one line
+        headers = {"Cache-Control": "no-cache", views.PLACEHOLDER_HEADER: _header_text(failed)}
+    return Response(png, media_type="image/png", headers=headers)
+
+
+def _header_text(text: str) -> str:
+    return "".join(c if 32 <= ord(c) < 127 else "?" for c in text)[:300]
 
 
 def to_response(result: search.SearchResult) -> SearchResponse:

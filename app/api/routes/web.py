@@ -76,5 +76,5 @@ async def preview(request: Request, runtime: RuntimeDep) -> Response:
     form = await read_form(request, settings.max_upload_bytes)
     filename, data = form.file("file")
     args = (data, upload_format(filename), settings.max_vertices)
-    png = await runtime.describer.run(render_upload, args, "rendering the preview")
+    png = await runtime.describer.run(render_upload, args, "rendering the preview", kind="render")
     return Response(png, media_type="image/png", headers={"Cache-Control": "no-store"})
