@@ -114,10 +114,7 @@ mutate: install  ## mutation testing (mutmut) of app/core + listed api/services/
 	$(BIN)/mutmut run --max-children $(MUTATE_CHILDREN) $(MUTATE); rc=$$?; \
 	$(BIN)/python tools/mutation_report.py; exit $$rc
 
-docker-docs: install  ## the documentation site (MkDocs Material) built strictly into site/: a broken link or a page outside the nav fails
-	$(BIN)/mkdocs build --strict --site-dir site
-
-lint: install  ## hadolint the Dockerfile; `docker compose config -q` where compose v2 is installed
+docker-lint: install  ## hadolint the Dockerfile; `docker compose config -q` where compose v2 is installed
 	$(BIN)/hadolint Dockerfile && echo "Dockerfile: hadolint clean"
 	@plugin=$$(bash $(DOCKER_UP) --env 2>/dev/null | sed -n 's/^export DOCKER_CONFIG=//p'); \
 	if [ -n "$$plugin" ] && [ -x "$$plugin/cli-plugins/docker-compose" ]; then export DOCKER_CONFIG=$$plugin; fi; \
