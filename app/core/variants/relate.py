@@ -1,0 +1,191 @@
+"""Verify a candidate pair and say how the two meshes are related, with the numbers behind it.
+
+relate(a, b) answers for the query `a` against the stored `b`:
+
+- identical      the same triangles on the same vertices, in place (any format, vertex or face order);
+- moved          the same triangles after a rigid motion;
+- rescaled       the same triangles after a uniform scale (and perhaps a motion): `scale` says by what;
+- mirrored       the same triangles after a reflection (and perhaps a scale and a motion);
+- retriangulated the same surface within a tolerance, other triangles (remeshed, decimated, repaired,
+                 slightly noisy); `scale` and `mirrored` still say how it sits;
+- part_of        every object of `a` is one of the objects of `b` (a part of a plate or kit);
+- contains       every object of `b` is one of the objects of `a` (a plate holding `b`, perhaps copies);
+- similar        none of the above: only the ranking relates them.
+
+Distances are relative to the bounding-box diagonal of `b`. `transform` (4 x 4) maps `a` onto `b`
+(for `contains`, the matched part of `a` onto `b`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from app.core.variants.align import Similarity, hypotheses, icp, to_world, umeyama
+from app.core.variants.prepared import Prepared, face_keys
+
+RELATIONS = ("identical", "moved", "rescaled", "mirrored", "retriangulated", "part_of", "contains", "similar")
+EXACT = ("identical", "moved", "rescaled", "mirrored")
+CHAMFER_MAX = 0.006  # same surface: mean surface distance below 0.6 % of the diagonal ...
+HAUSDORFF_MAX = 0.06  # ... and no point farther than 6 % (a punched hole, a decimated corner)
+COVER_TOLERANCE = 0.01  # a sample is "covered" by the other surface within 1 % of the diagonal
+IDENTITY_TOL = 1e-4  # rotation angle (rad), |log scale| and translation / diagonal read as "none"
+COARSE_POINTS = 256  # ICP on a subsample to rank the hypotheses, then the full samples on the best
+FINE_POINTS = 1024
+REFINE = 2  # hypotheses refined per handedness
+MAX_PARTS = 8  # objects of a multi-object mesh verified one by one
+
+
+@dataclass(frozen=True)
+class Evidence:
+    relation: str
+    confidence: float
+    chamfer: float  # symmetric mean surface distance / diagonal of b
+    hausdorff: float  # symmetric max surface distance / diagonal of b
+    forward: float  # fraction of a's surface within 1 % of the diagonal of b's
+    reverse: float  # fraction of b's surface within 1 % of the diagonal of a's
+    scale: float
+    mirrored: bool
+    same_triangles: bool
+    transform: list[list[float]]
+    copies: int = 1  # for part_of / contains: how many matching objects the larger one holds
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def relate(a: Prepared, b: Prepared) -> Evidence:
+    """The relation of `a` to `b` (module docstring), by whole surfaces first, then by objects."""
+    whole = verify(a, b)
+    if whole.relation != "similar":
+        return whole
+    na, nb = len(a.parts), len(b.parts)
+    if nb > 1 and nb > na:
+        found = _parts_in(a, b)
+        if found is not None:
+            return found
+    if na > 1 and na > nb:
+        found = _parts_in(b, a)
+        if found is not None:
+            inverse = np.linalg.inv(np.asarray(found.transform))
+            scale = 1.0 / found.scale
+            return Evidence(
+                "contains", found.confidence, found.chamfer, found.hausdorff, found.reverse, found.forward,
+                scale, found.mirrored, found.same_triangles, inverse.tolist(), found.copies,
+            )
+    return whole
+
+
+def verify(a: Prepared, b: Prepared) -> Evidence:
+    """Whole surface against whole surface: the exact relations, retriangulated or similar."""
+    exact = _exact(a, b, Similarity(1.0, np.eye(3), np.zeros(3)))  # in place: no search needed
+    if exact is not None:
+        return _exact_evidence(b, *exact)
+    fa, fb = a.frame, b.frame
+    coarse = a.normalised_samples[:: max(1, len(a.normalised_samples) // COARSE_POINTS)]
+    ranked: list[tuple[float, np.ndarray]] = []
+    fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
+    for start in hypotheses(fa, fb):
+        fit, cost = icp(coarse, b.normalised_tree, b.normalised_samples, start, iterations=10)
+        ranked.append((cost, fit.rotation))
+    ranked.sort(key=lambda r: r[0])
+    refined: list[tuple[float, Similarity]] = []
+    for mirrored in (False, True):
+        for _, rotation in [r for r in ranked if (np.linalg.det(r[1]) < 0) == mirrored][:REFINE]:
+            fit, cost = icp(fine, b.normalised_tree, b.normalised_samples, rotation,
+                            with_scale=True)
+            refined.append((cost, to_world(fa, fb, fit)))
+    refined.sort(key=lambda r: (r[1].mirrored, r[0]))  # proper first: a symmetric shape is not "mirrored"
+    for _, sim in refined:
+        exact = _exact(a, b, sim)
+        if exact is not None:
+            return _exact_evidence(b, *exact)
+    best = min(refined, key=lambda r: r[0])[1]
+    return _evidence(a, b, best)
+
+
+def _exact(a: Prepared, b: Prepared, guess: Similarity) -> tuple[Similarity, float] | None:
+    """The similarity fitted exactly on vertex correspondences, if a's triangles are b's triangles
+    under it (every vertex within float32 rounding of its partner, the same vertex triples)."""
+    if a.mesh.n_vertices != b.mesh.n_vertices or a.mesh.n_faces != b.mesh.n_faces:
+        return None
+    moved = guess.apply(a.mesh.vertices)
+    dist, idx = b.vertex_tree.query(moved, workers=1)
+    if dist.max() > 0.01 * b.diagonal or np.unique(idx).size != idx.size:
+        return None
+    fit = umeyama(a.mesh.vertices, b.mesh.vertices[idx], mirrored=guess.mirrored)
+    residual = np.linalg.norm(fit.apply(a.mesh.vertices) - b.mesh.vertices[idx], axis=1).max()
+    # float32 files round each coordinate to 2^-24 of its magnitude; 1e-5 of the size on top
+    extent = np.abs(b.mesh.vertices).max() + fit.scale * np.abs(a.mesh.vertices).max()
+    if residual > 1e-5 * b.diagonal + 2.0**-22 * extent:
+        return None
+    if not np.array_equal(face_keys(idx[a.mesh.faces], b.mesh.n_vertices), b.face_keys):
+        return None
+    return fit, float(residual)
+
+
+def _exact_evidence(b: Prepared, sim: Similarity, residual: float) -> Evidence:
+    """Same triangles: each point of a triangle moves by a blend of its corners' residuals, so the
+    largest vertex residual bounds the Hausdorff distance (and the Chamfer distance) exactly."""
+    bound = residual / b.diagonal
+    return Evidence(_exact_relation(sim, b.diagonal), 1.0, bound, bound, 1.0, 1.0, sim.scale, sim.mirrored,
+                    True, sim.matrix().tolist())
+
+
+def _evidence(a: Prepared, b: Prepared, sim: Similarity) -> Evidence:
+    diag = b.diagonal
+    ab = b.distance_to(sim.apply(a.samples[0]))  # (N,) a's samples to b's surface
+    ba = a.distance_to(_inverse(sim).apply(b.samples[0])) * sim.scale  # (N,) b's samples to a's, b's units
+    chamfer = 0.5 * float(ab.mean() + ba.mean()) / diag
+    hausdorff = float(max(ab.max(), ba.max())) / diag
+    forward = float((ab <= COVER_TOLERANCE * diag).mean())
+    reverse = float((ba <= COVER_TOLERANCE * diag).mean())
+    margin = max(chamfer / CHAMFER_MAX, hausdorff / HAUSDORFF_MAX)
+    if margin < 1.0:
+        relation, confidence = "retriangulated", 1.0 - 0.5 * margin
+    else:
+        relation, confidence = "similar", 1.0 - 0.5 / margin
+    return Evidence(relation, round(confidence, 4), chamfer, hausdorff, forward, reverse, sim.scale,
+                    sim.mirrored, False, sim.matrix().tolist())
+
+
+def _exact_relation(sim: Similarity, diagonal: float) -> str:
+    if sim.mirrored:
+        return "mirrored"
+    if abs(np.log(sim.scale)) > IDENTITY_TOL:
+        return "rescaled"
+    angle = np.arccos(np.clip((np.trace(sim.rotation) - 1.0) / 2.0, -1.0, 1.0))
+    if angle > IDENTITY_TOL or np.linalg.norm(sim.translation) > IDENTITY_TOL * diagonal:
+        return "moved"
+    return "identical"
+
+
+def _inverse(sim: Similarity) -> Similarity:
+    rotation = sim.rotation.T
+    return Similarity(1.0 / sim.scale, rotation, -rotation @ sim.translation / sim.scale)
+
+
+def _parts_in(small: Prepared, big: Prepared) -> Evidence | None:
+    """Every object of `small` matched to an object of `big` (whole-surface relation other than
+    similar); the evidence of the largest object's match, with the copies of it that `big` holds."""
+    first: Evidence | None = None
+    for part in small.parts[:MAX_PARTS]:
+        order = np.argsort([np.linalg.norm(part.fingerprint - o.fingerprint) for o in big.parts])
+        matches = []
+        for j in order[: 2 * MAX_PARTS]:
+            ev = verify(part, big.parts[int(j)])
+            if ev.relation != "similar":
+                matches.append(ev)
+            elif matches:
+                break  # candidates come nearest first: the copies are together at the front
+        if not matches:
+            return None
+        if first is None:
+            first = Evidence(**{**matches[0].to_dict(), "copies": len(matches)})
+    assert first is not None
+    # coverage against the whole of `big`, as the whole-surface check measures it
+    whole = _evidence(small, big, Similarity(first.scale, np.asarray(first.transform)[:3, :3] / first.scale,
+                                             np.asarray(first.transform)[:3, 3]))
+    return Evidence("part_of", first.confidence, first.chamfer, first.hausdorff, whole.forward, whole.reverse,
+                    first.scale, first.mirrored, first.same_triangles, first.transform, first.copies)
