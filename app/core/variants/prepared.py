@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from app.core.meshdata import Mesh
@@ -84,10 +85,14 @@ class Prepared:
         slot = np.minimum(np.arange(16)[None, :], np.maximum(count, 1)[:, None] - 1)  # (n, 8)
         return face[np.minimum(start[:, None] + slot, len(face) - 1)]
 
-    @cached_property
-    def face_keys(self) -> np.ndarray:
-        """(f,) int64 sorted keys of the triangles as vertex sets (winding and order ignored)."""
-        return face_keys(self.mesh.faces, self.mesh.n_vertices)
+    def weld(self, tolerance: float) -> np.ndarray:
+        """(n,) int label per vertex: vertices closer than `tolerance` (transitively) share one."""
+        pairs = self.vertex_tree.query_pairs(tolerance, output_type="ndarray")  # (p, 2)
+        if not len(pairs):
+            return np.arange(self.mesh.n_vertices)
+        n = self.mesh.n_vertices
+        graph = sp.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+        return sp.csgraph.connected_components(graph, directed=False)[1]
 
     @cached_property
     def parts(self) -> list[Prepared]:

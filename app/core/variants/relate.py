@@ -34,6 +34,7 @@ IDENTITY_TOL = 1e-4  # rotation angle (rad), |log scale| and translation / diago
 COARSE_POINTS = 256  # ICP on a subsample to rank the hypotheses, then the full samples on the best
 FINE_POINTS = 1024
 REFINE = 2  # hypotheses refined per handedness
+EXACT_ROUNDS = 4
 MAX_PARTS = 8  # objects of a multi-object mesh verified one by one
 
 
@@ -84,20 +85,25 @@ def verify(a: Prepared, b: Prepared) -> Evidence:
         return _exact_evidence(b, *exact)
     fa, fb = a.frame, b.frame
     coarse = a.normalised_samples[:: max(1, len(a.normalised_samples) // COARSE_POINTS)]
-    ranked: list[tuple[float, np.ndarray]] = []
     fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
+    ranked: list[tuple[float, Similarity]] = []
     for start in hypotheses(fa, fb):
         fit, cost = icp(coarse, b.normalised_tree, b.normalised_samples, start, iterations=10)
-        ranked.append((cost, fit.rotation))
-    ranked.sort(key=lambda r: r[0])
+        ranked.append((cost, fit))
+    ranked.sort(key=lambda r: (r[1].mirrored, r[0]))  # proper first: a symmetric shape is not "mirrored"
+    best_cost = min(r[0] for r in ranked)
+    for cost, fit in ranked:  # the same triangles under any hypothesis about as good as the best
+        if cost <= 2.0 * best_cost + 1e-3:
+            exact = _exact(a, b, to_world(fa, fb, fit))
+            if exact is not None:
+                return _exact_evidence(b, *exact)
     refined: list[tuple[float, Similarity]] = []
     for mirrored in (False, True):
-        for _, rotation in [r for r in ranked if (np.linalg.det(r[1]) < 0) == mirrored][:REFINE]:
-            fit, cost = icp(fine, b.normalised_tree, b.normalised_samples, rotation,
-                            with_scale=True)
+        for _, rough in [r for r in ranked if r[1].mirrored == mirrored][:REFINE]:
+            fit, cost = icp(fine, b.normalised_tree, b.normalised_samples, rough.rotation, with_scale=True)
             refined.append((cost, to_world(fa, fb, fit)))
-    refined.sort(key=lambda r: (r[1].mirrored, r[0]))  # proper first: a symmetric shape is not "mirrored"
-    for _, sim in refined:
+    refined.sort(key=lambda r: r[0])
+    for _, sim in refined[:1]:  # the best fit, polished on the vertices when they are the same
         exact = _exact(a, b, sim)
         if exact is not None:
             return _exact_evidence(b, *exact)
@@ -106,23 +112,38 @@ def verify(a: Prepared, b: Prepared) -> Evidence:
 
 
 def _exact(a: Prepared, b: Prepared, guess: Similarity) -> tuple[Similarity, float] | None:
-    """The similarity fitted exactly on vertex correspondences, if a's triangles are b's triangles
-    under it (every vertex within float32 rounding of its partner, the same vertex triples)."""
-    if a.mesh.n_vertices != b.mesh.n_vertices or a.mesh.n_faces != b.mesh.n_faces:
+    """The similarity fitted on vertex correspondences, and its largest vertex residual, if a's
+    triangles are b's triangles under it: every vertex of a within float32 rounding of a vertex of b,
+    and a's triangles, through that vertex map, exactly b's set of triangles. The map may join two of
+    a's vertices that a file format's rounding made one (a weld), never two distinct ones."""
+    if not 0.98 * b.mesh.n_faces <= a.mesh.n_faces <= 1.02 * b.mesh.n_faces + 2:
         return None
-    moved = guess.apply(a.mesh.vertices)
-    dist, idx = b.vertex_tree.query(moved, workers=1)
-    if dist.max() > 0.01 * b.diagonal or np.unique(idx).size != idx.size:
-        return None
-    fit = umeyama(a.mesh.vertices, b.mesh.vertices[idx], mirrored=guess.mirrored)
-    residual = np.linalg.norm(fit.apply(a.mesh.vertices) - b.mesh.vertices[idx], axis=1).max()
+    va, vb = a.mesh.vertices, b.mesh.vertices
+    fit = guess
     # float32 files round each coordinate to 2^-24 of its magnitude; 1e-5 of the size on top
-    extent = np.abs(b.mesh.vertices).max() + fit.scale * np.abs(a.mesh.vertices).max()
-    if residual > 1e-5 * b.diagonal + 2.0**-22 * extent:
+    for _ in range(EXACT_ROUNDS):  # vertex ICP: from a close guess, the map is right after a round or two
+        dist, idx = b.vertex_tree.query(fit.apply(va), workers=1)
+        if dist.max() > 0.02 * b.diagonal:
+            return None
+        fit = umeyama(va, vb[idx], mirrored=guess.mirrored)
+        residual = float(np.linalg.norm(fit.apply(va) - vb[idx], axis=1).max())
+        extent = np.abs(vb).max() + fit.scale * np.abs(va).max()
+        if residual <= 1e-5 * b.diagonal + 2.0**-22 * extent:
+            break
+    else:
         return None
-    if not np.array_equal(face_keys(idx[a.mesh.faces], b.mesh.n_vertices), b.face_keys):
+    # b's own vertices closer than the tolerance count as one (a format's rounding joins them)
+    weld = b.weld(1e-5 * b.diagonal + 2.0**-22 * extent)  # (n_b,) label
+    if not np.array_equal(_triangles(weld[idx[a.mesh.faces]]), _triangles(weld[b.mesh.faces])):
         return None
-    return fit, float(residual)
+    return fit, residual
+
+
+def _triangles(faces: np.ndarray) -> np.ndarray:
+    """Distinct triangles as vertex sets, (f', ) int64 keys; a row a weld made degenerate left out."""
+    s = np.sort(faces, axis=1)
+    s = s[(s[:, 0] != s[:, 1]) & (s[:, 1] != s[:, 2])]
+    return np.unique(face_keys(s, int(faces.max(initial=0)) + 1))
 
 
 def _exact_evidence(b: Prepared, sim: Similarity, residual: float) -> Evidence:
