@@ -15,7 +15,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from app.api import errors
 from app.api.deps import Runtime
 from app.api.limits import GuardUploads, RefuseEncodedBodies, check_data_dir
-from app.api.routes import admin, docs, explain, health, jobs, labels, models, search, web
+from app.api.routes import admin, docs, explain, health, jobs, labels, models, search, variants, web
 from app.config import Settings
 from app.services import vocabularies
 from app.services.context import ServiceContext, open_context
@@ -98,7 +98,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         )
         return response
 
-    for module in (models, labels, jobs, search, admin, health, web, docs, explain):
+    for module in (models, variants, labels, jobs, search, admin, health, web, docs, explain):
         app.include_router(module.router)
     return app
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from app.core.mesh import detect_format, load_mesh
 from app.core.pipeline import describe
+from app.services import variants
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError, QueueFullError
 from app.services.metadata import check_metadata
@@ -105,6 +106,7 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
     timings["load"] = time.perf_counter() - t
     description = describe(mesh, ctx.settings.describe.params())
     timings.update({f"describe.{k}": v for k, v in description.seconds.items()})
+    found, timings["variants"] = variants.timed_detect(ctx, model.id, mesh)  # advisory: never fails a job
     ctx.blobs.put_description(model.id, description.save)
     for _ in range(5):  # encode with the active version; redo if a swap lands meanwhile
         t = time.perf_counter()
@@ -126,6 +128,6 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
             if active is not None and vector is not None:
                 vocab_repo.put_vector(conn, model.id, active.id, vector)
             models_repo.set_ready(conn, model.id, mesh.n_vertices)
-            jobs_repo.mark_done(conn, job.id, timings)
+            jobs_repo.mark_done(conn, job.id, {**timings, "result": {"variants": found}})
         return timings
     raise RuntimeError("the active vocabulary kept changing during ingestion")

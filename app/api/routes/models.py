@@ -23,7 +23,7 @@ from app.api.schemas import (
     SearchResponse,
 )
 from app.api.uploads import multipart_body, read_form
-from app.services import catalog, ingestion, maintenance, metadata, rendering, search
+from app.services import catalog, ingestion, maintenance, metadata, rendering, search, variants
 from app.services.errors import InvalidInputError, NotFoundError
 
 router = APIRouter(prefix="/models", tags=["models"])
@@ -67,11 +67,13 @@ async def upload_model(request: Request, runtime: RuntimeDep, _: UploadDep) -> J
     result = await run_in_threadpool(
         ingestion.submit, ctx, data, filename, fields.name, fields.label, fields.metadata
     )
+    known = None if result.created else await run_in_threadpool(variants.brief, ctx, result.model.id)
     body = ModelAccepted(
         model_id=result.model.id,
         job_id=result.job_id,
         status=result.model.status,
         model=ModelPublic.of(result.model),
+        variants=known,  # a new model's are found by its job (its result, then GET /models/{id})
         **_duplicate(result, fields.name, fields.label),
     )
     code = status.HTTP_202_ACCEPTED if result.job_id is not None else status.HTTP_200_OK  # new or retried
@@ -108,7 +110,9 @@ def list_models(
 
 @router.get("/{model_id}", response_model=ModelPublic, responses=ERRORS)
 def get_model(model_id: IdPath, ctx: CtxDep) -> ModelPublic:
-    return ModelPublic.of(catalog.get_model(ctx, model_id))
+    public = ModelPublic.of(catalog.get_model(ctx, model_id))
+    public.variants = variants.brief(ctx, model_id)
+    return public
 
 
 @router.get("/{model_id}/mesh", responses=ERRORS, response_class=FileResponse)
@@ -136,7 +140,7 @@ def similar(
     label: str | None = None,
 ) -> SearchResponse:
     result = search.similar(runtime.ctx, runtime.live, model_id, k, label)
-    return to_response(result)
+    return to_response(result, variants.relations_with(runtime.ctx, model_id))
 
 
 @router.get("/{model_id}/thumbnail.png", responses=ERRORS, response_class=Response)
@@ -158,10 +162,13 @@ async def thumbnail(
     )
 
 
-def to_response(result: search.SearchResult) -> SearchResponse:
+def to_response(result: search.SearchResult, relations: dict[int, str] | None = None) -> SearchResponse:
+    """relations: {model id: verified variant relation to the query model}, shown on the hits."""
+    relations = relations or {}
     hits = [
         SearchHit(
-            model_id=h.model.id, name=h.model.name, label=h.model.label, distance=h.distance, rank=h.rank
+            model_id=h.model.id, name=h.model.name, label=h.model.label, distance=h.distance, rank=h.rank,
+            relation=relations.get(h.model.id),
         )
         for h in result.hits
     ]
