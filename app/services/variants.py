@@ -119,8 +119,9 @@ def variants_of(ctx: ServiceContext, model_id: int) -> list[dict]:
         evidence = link["evidence"] if forward else reverse(link["evidence"])
         if other not in names:
             continue
+        decision = decisions.get(other)
         out.append({"model_id": other, "name": names[other].name, **evidence,
-                    "decision": decisions.get(other)})
+                    "decision": {**decision, "model_id": model_id, "other_id": other} if decision else None})
     return out
 
 
