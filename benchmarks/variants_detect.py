@@ -112,7 +112,9 @@ class Run:
                 got, conf, ch, hd = ev.relation, ev.confidence, ev.chamfer, ev.hausdorff
             else:
                 got, conf, ch, hd = "similar", 1.0, float("nan"), float("nan")
+            area = q.mesh.area() / self.stored[i][1].mesh.area()  # a decimation that lost parts shows here
             self.pairs.append({"query": name, "kind": kind, "stored": self.stored[i][0], "truth": expected,
+                               "area_ratio": area,
                                "got": got, "confidence": conf, "looked_up": i in found,
                                "chamfer": ch, "hausdorff": hd})
 
@@ -254,6 +256,7 @@ def main(argv: list[str] | None = None) -> int:
             by_kind[p["kind"].split(":")[0] if p["kind"].startswith("export") else p["kind"]].append(p)
     print(table([{"kind": k, "pairs": len(v), "right": sum(p["got"] == p["truth"] for p in v) / len(v),
                   "lookup missed": sum(not p["looked_up"] for p in v),
+                  "area kept <0.9": sum(p["area_ratio"] < 0.9 for p in v),
                   "said": dict(Counter(p["got"] for p in v))} for k, v in by_kind.items()], title="per kind"))
     negs = [p for p in pairs if p["kind"] == "negative"]
     print(f"hard negatives: {len(negs)} pairs, {sum(p['got'] != 'similar' for p in negs)} called anything but"
