@@ -51,6 +51,14 @@ def test_identical_through_a_float32_file(hull) -> None:
     assert _relate(load_mesh(data, "stl"), stored).relation == "identical"
 
 
+def test_identical_through_a_six_decimal_text_file(hull) -> None:
+    """A 1 cm part in metres written with 6 decimals (as many exporters do) is still the same mesh."""
+    small = Mesh(hull.vertices * 0.004, hull.faces)
+    text = "".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in small.vertices)
+    text += "".join(f"f {a} {b} {c}\n" for a, b, c in small.faces + 1)
+    assert _relate(load_mesh(text.encode(), "obj"), small).relation == "identical"
+
+
 def test_moved_with_the_transform_that_maps_it(hull, random_rotation) -> None:
     rotation, shift = random_rotation(5), np.array([3.0, -2.0, 7.0])
     moved = Mesh(hull.vertices @ rotation.T + shift, hull.faces)

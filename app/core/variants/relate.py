@@ -35,6 +35,7 @@ COARSE_POINTS = 256  # ICP on a subsample to rank the hypotheses, then the full 
 FINE_POINTS = 1024
 REFINE = 2  # hypotheses refined per handedness
 EXACT_ROUNDS = 4
+EXACT_TOL = 1e-4  # same triangles: every vertex within this fraction of the diagonal of its partner
 MAX_PARTS = 8  # objects of a multi-object mesh verified one by one
 
 
@@ -120,7 +121,8 @@ def _exact(a: Prepared, b: Prepared, guess: Similarity) -> tuple[Similarity, flo
         return None
     va, vb = a.mesh.vertices, b.mesh.vertices
     fit = guess
-    # float32 files round each coordinate to 2^-24 of its magnitude; 1e-5 of the size on top
+    # float32 files round each coordinate to 2^-24 of its magnitude, text files to a number of decimals
+    # (6 in many exporters: 5e-7 absolute, 5e-5 of a 1 cm part in metres); 1e-4 of the size covers both
     for _ in range(EXACT_ROUNDS):  # vertex ICP: from a close guess, the map is right after a round or two
         dist, idx = b.vertex_tree.query(fit.apply(va), workers=1)
         if dist.max() > 0.02 * b.diagonal:
@@ -128,12 +130,12 @@ def _exact(a: Prepared, b: Prepared, guess: Similarity) -> tuple[Similarity, flo
         fit = umeyama(va, vb[idx], mirrored=guess.mirrored)
         residual = float(np.linalg.norm(fit.apply(va) - vb[idx], axis=1).max())
         extent = np.abs(vb).max() + fit.scale * np.abs(va).max()
-        if residual <= 1e-5 * b.diagonal + 2.0**-22 * extent:
+        if residual <= EXACT_TOL * b.diagonal + 2.0**-22 * extent:
             break
     else:
         return None
     # b's own vertices closer than the tolerance count as one (a format's rounding joins them)
-    weld = b.weld(1e-5 * b.diagonal + 2.0**-22 * extent)  # (n_b,) label
+    weld = b.weld(EXACT_TOL * b.diagonal + 2.0**-22 * extent)  # (n_b,) label
     if not np.array_equal(_triangles(weld[idx[a.mesh.faces]]), _triangles(weld[b.mesh.faces])):
         return None
     return fit, residual
