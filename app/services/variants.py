@@ -31,8 +31,6 @@ class FingerprintCache:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._seq = 0
-        self._ids = np.zeros(0, np.int64)
-        self._vectors = np.zeros((0, DIM), np.float32)
         self._index = FingerprintIndex()
 
     def candidates(self, ctx: ServiceContext, queries: np.ndarray, exclude: int) -> list[int]:
@@ -42,9 +40,7 @@ class FingerprintCache:
                     conn, self._seq, FINGERPRINT_VERSION, DIM
                 )
             if len(ids):
-                self._ids = np.concatenate([self._ids, ids])
-                self._vectors = np.concatenate([self._vectors, vectors])
-                self._index.build(self._ids, self._vectors)
+                self._index.add(ids, vectors)
             self._seq = seq
             found = self._index.candidates(queries, k=K, radius=RADIUS)
         return [i for i in found if i != exclude][:VERIFY]

@@ -112,4 +112,9 @@ def test_index_candidates_nearest_first_and_hnsw_agrees_with_flat() -> None:
     agree = np.mean([len(set(a) & set(b)) / len(set(a)) for a, b in zip(got_flat, got_hnsw, strict=True)])
     assert agree > 0.9
     assert flat.candidates(queries[:1], k=4, radius=0.01) == [0]
+    grown = FingerprintIndex(exact_below=2000)  # rows added in steps, past the switch to a graph
+    for start in range(0, 3000, 1000):
+        grown.add(keys[start:start + 1000], data[start:start + 1000])
+    got_grown, _ = grown.search(queries, 8)
+    assert len(grown) == 3000 and (got_grown[:, 0] == keys[:50]).all()
     assert FingerprintIndex().candidates(queries[:1]) == []

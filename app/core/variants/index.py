@@ -36,6 +36,18 @@ class FingerprintIndex:
             self._index = hnsw
         self._index.add(self._vectors)
 
+    def add(self, keys: np.ndarray, vectors: np.ndarray) -> None:
+        """Append rows (a graph index grows in place; a flat one becomes a graph past `exact_below`)."""
+        keys = np.asarray(keys, np.int64)
+        vectors = np.ascontiguousarray(vectors, dtype=np.float32).reshape(-1, DIM)
+        flat = isinstance(self._index, faiss.IndexFlatL2)
+        if self._index is None or (flat and len(self._keys) + len(keys) >= self._exact_below):
+            self.build(np.concatenate([self._keys, keys]), np.concatenate([self._vectors, vectors]))
+            return
+        self._keys = np.concatenate([self._keys, keys])
+        self._vectors = np.concatenate([self._vectors, vectors])
+        self._index.add(vectors)
+
     def search(self, queries: np.ndarray, k: int = 16) -> tuple[np.ndarray, np.ndarray]:
         """queries (q, DIM) -> (keys (q, k) int64, L2 distances (q, k)); key -1 where fewer exist."""
         queries = np.ascontiguousarray(queries, dtype=np.float32).reshape(-1, DIM)

@@ -14,6 +14,7 @@ from app.core.cleaning import face_components
 from app.core.meshdata import Mesh
 
 SAMPLE_SEED = 0  # a fixed stream: the same mesh always gives the same samples and fingerprint
+MAX_COMPONENTS = 2000  # the box-overlap test below is quadratic in the number of components
 
 
 @dataclass(frozen=True)
@@ -80,7 +81,7 @@ def objects(mesh: Mesh, min_area_fraction: float = 0.02, max_objects: int = 64) 
     """
     labels = face_components(mesh.faces, mesh.n_vertices)  # (f,)
     n = int(labels.max()) + 1
-    if n == 1:
+    if n == 1 or n > MAX_COMPONENTS:  # thousands of pieces are a fragmented model, not a plate of parts
         return [mesh]
     tri = mesh.vertices[mesh.faces]
     lo = np.full((n, 3), np.inf)
