@@ -12,7 +12,7 @@ import numpy as np
 
 from app.core.mesh import InvalidMeshError, Mesh, load_mesh
 from app.core.variants import DIM, FINGERPRINT_VERSION, Evidence, Prepared, relate
-from app.core.variants.collection import RADIUS, VERIFY, K, fingerprints
+from app.core.variants.collection import fingerprints, shortlist
 from app.core.variants.index import FingerprintIndex
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError, NotFoundError
@@ -42,8 +42,7 @@ class FingerprintCache:
             if len(ids):
                 self._index.add(ids, vectors)
             self._seq = seq
-            found = self._index.candidates(queries, k=K, radius=RADIUS)
-        return [i for i in found if i != exclude][:VERIFY]
+            return shortlist(self._index, queries, exclude)
 
 
 _CACHES: dict[str, FingerprintCache] = {}

@@ -111,10 +111,24 @@ def test_index_candidates_nearest_first_and_hnsw_agrees_with_flat() -> None:
     assert (got_flat[:, 0] == keys[:50]).all()
     agree = np.mean([len(set(a) & set(b)) / len(set(a)) for a, b in zip(got_flat, got_hnsw, strict=True)])
     assert agree > 0.9
-    assert flat.candidates(queries[:1], k=4, radius=0.01) == [0]
+    assert flat.nearest(queries[:1], k=4, radius=0.01) == [(0, pytest.approx(0.001 * 17**0.5, rel=1e-3))]
     grown = FingerprintIndex(exact_below=2000)  # rows added in steps, past the switch to a graph
     for start in range(0, 3000, 1000):
         grown.add(keys[start:start + 1000], data[start:start + 1000])
     got_grown, _ = grown.search(queries, 8)
     assert len(grown) == 3000 and (got_grown[:, 0] == keys[:50]).all()
-    assert FingerprintIndex().candidates(queries[:1]) == []
+    assert FingerprintIndex().nearest(queries[:1]) == []
+
+
+def test_shortlist_verifies_every_near_copy_and_a_few_others() -> None:
+    from app.core.variants.collection import VERIFY, shortlist
+
+    rng = np.random.default_rng(1)
+    base = rng.random(17).astype(np.float32)
+    near = base + rng.normal(scale=0.001, size=(9, 17)).astype(np.float32)  # 9 copies of one part
+    far = base + rng.normal(scale=0.05, size=(20, 17)).astype(np.float32)  # 20 looser neighbours
+    index = FingerprintIndex()
+    index.build(np.arange(29), np.vstack([near, far]))
+    got = shortlist(index, base[None])
+    assert set(got[:9]) == set(range(9)) and len(got) == 9  # all the copies, past the cap of VERIFY
+    assert len(shortlist(index, far[:1], exclude=9)) == VERIFY

@@ -9,9 +9,11 @@ from app.core.variants.index import FingerprintIndex
 from app.core.variants.prepared import Prepared
 from app.core.variants.relate import Evidence, relate
 
-K = 16  # neighbours asked of the index per fingerprint (a model's whole and each of its objects)
+K = 32  # neighbours asked of the index per fingerprint (a model's whole and each of its objects)
 RADIUS = 0.5  # fingerprint distance past which nothing is verified
-VERIFY = 5  # candidates verified per model, nearest first
+VERIFY = 5  # candidates verified per model, nearest first ...
+SURE = 0.05  # ... and every one this close, however many (one part on many plates), up to MAX_SURE
+MAX_SURE = 32
 
 
 def fingerprints(p: Prepared) -> np.ndarray:
@@ -31,14 +33,21 @@ def build_index(items: list[Prepared]) -> FingerprintIndex:
     return index
 
 
-def find_pairs(items: list[Prepared], verify: int = VERIFY) -> list[tuple[int, int, Evidence]]:
+def shortlist(index: FingerprintIndex, queries: np.ndarray, exclude: int | None = None) -> list[int]:
+    """The models worth verifying for a model with these fingerprints (queries (q, DIM))."""
+    found = [(k, d) for k, d in index.nearest(queries, k=K, radius=RADIUS) if k != exclude]
+    sure = [k for k, d in found if d <= SURE][:MAX_SURE]
+    rest = [k for k, d in found if d > SURE]
+    return sure + rest[: max(0, VERIFY - len(sure))]
+
+
+def find_pairs(items: list[Prepared]) -> list[tuple[int, int, Evidence]]:
     """(i, j, relation of i to j) for every verified pair i < j that is more than `similar`."""
     index = build_index(items)
     done: set[tuple[int, int]] = set()
     out = []
     for i, p in enumerate(items):
-        found = [j for j in index.candidates(fingerprints(p), k=K, radius=RADIUS) if j != i][:verify]
-        for j in found:
+        for j in shortlist(index, fingerprints(p), exclude=i):
             pair = (min(i, j), max(i, j))
             if pair in done:
                 continue

@@ -57,13 +57,14 @@ class FingerprintIndex:
         keys = np.where(rows >= 0, self._keys[np.maximum(rows, 0)], -1)
         return keys, np.sqrt(np.maximum(dist, 0.0))
 
-    def candidates(self, queries: np.ndarray, k: int = 16, radius: float = 0.25) -> list[int]:
-        """Distinct keys near any of the queries (q, DIM), nearest first, within `radius` in L2."""
+    def nearest(self, queries: np.ndarray, k: int = 16, radius: float = 0.25) -> list[tuple[int, float]]:
+        """Distinct keys near any of the queries (q, DIM) within `radius` in L2, with the distance of
+        their nearest row, nearest first."""
         keys, dist = self.search(queries, k)
         order = np.argsort(dist, axis=None)
-        seen: dict[int, None] = {}
+        seen: dict[int, float] = {}
         for flat in order:
             key, d = int(keys.flat[flat]), float(dist.flat[flat])
             if key >= 0 and d <= radius:
-                seen.setdefault(key, None)
-        return list(seen)
+                seen.setdefault(key, d)
+        return list(seen.items())
