@@ -105,6 +105,17 @@ def test_retriangulated_subdivided_and_noisy(hull, random_rotation) -> None:
     assert _relate(noisy, hull).relation == "retriangulated"
 
 
+def test_retriangulated_says_whether_it_is_mirrored(hull) -> None:
+    v, f = trimesh.remesh.subdivide(hull.vertices, hull.faces)
+    ev = _relate(Mesh(v * [1, 1, -1], f[:, ::-1]), hull)
+    assert (ev.relation, ev.mirrored) == ("retriangulated", True)
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    ellipsoid = Mesh(np.asarray(sphere.vertices) * [1.0, 2.0, 3.0], np.asarray(sphere.faces, np.int64))
+    v, f = trimesh.remesh.subdivide(ellipsoid.vertices, ellipsoid.faces)
+    ev = _relate(Mesh(v * [-1, 1, 1], f[:, ::-1]), ellipsoid)  # symmetric: a motion fits as well
+    assert (ev.relation, ev.mirrored) == ("retriangulated", False)
+
+
 def test_part_of_a_plate_and_the_plate_contains_its_copies(hull) -> None:
     other = _hull(11)
     mixed = _plate([other, hull, _hull(12)])

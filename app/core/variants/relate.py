@@ -33,6 +33,7 @@ COVER_TOLERANCE = 0.01  # a sample is "covered" by the other surface within 1 % 
 IDENTITY_TOL = 1e-4  # rotation angle (rad), |log scale| and translation / diagonal read as "none"
 COARSE_POINTS = 256  # ICP on a subsample to rank the hypotheses, then the full samples on the best
 FINE_POINTS = 1024
+MIRROR_MARGIN = 0.8  # an improper fit wins only when its ICP cost is 20 % lower
 REFINE = 2  # hypotheses refined per handedness
 EXACT_ROUNDS = 4
 EXACT_TOL = 1e-4  # same triangles: every vertex within this fraction of the diagonal of its partner
@@ -108,13 +109,16 @@ def verify(a: Prepared, b: Prepared) -> Evidence:
         exact = _exact(a, b, sim)
         if exact is not None:
             return _exact_evidence(b, *exact)
-    best = min(refined, key=lambda r: r[0])[1]
-    return _evidence(a, b, best)
+    proper = min((r for r in refined if not r[1].mirrored), key=lambda r: r[0])
+    improper = min((r for r in refined if r[1].mirrored), key=lambda r: r[0])
+    # a (nearly) mirror-symmetric shape fits both ways: call it mirrored only when clearly better
+    best = improper if improper[0] < MIRROR_MARGIN * proper[0] else proper
+    return _evidence(a, b, best[1])
 
 
 def _exact(a: Prepared, b: Prepared, guess: Similarity) -> tuple[Similarity, float] | None:
     """The similarity fitted on vertex correspondences, and its largest vertex residual, if a's
-    triangles are b's triangles under it: every vertex of a within float32 rounding of a vertex of b,
+    triangles are b's triangles under it: every vertex of a within EXACT_TOL of a vertex of b,
     and a's triangles, through that vertex map, exactly b's set of triangles. The map may join two of
     a's vertices that a file format's rounding made one (a weld), never two distinct ones."""
     if not 0.98 * b.mesh.n_faces <= a.mesh.n_faces <= 1.02 * b.mesh.n_faces + 2:
