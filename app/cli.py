@@ -8,7 +8,7 @@ import importlib
 import sys
 
 # order = order in --help
-COMMANDS = ("serve", "worker", "ingest", "search", "vocabulary", "evaluate", "demo")
+COMMANDS = ("serve", "worker", "ingest", "search", "variants", "vocabulary", "evaluate", "demo")
 
 
 class CommandError(Exception):

@@ -16,7 +16,7 @@ from app.api import errors
 from app.api.client_budget import ClientBudget, document_client_bound
 from app.api.deps import Runtime
 from app.api.limits import GuardUploads, RefuseEncodedBodies, check_data_dir
-from app.api.routes import admin, docs, explain, health, jobs, labels, models, search, web
+from app.api.routes import admin, docs, explain, health, jobs, labels, models, search, variants, web
 from app.api.security import SecureEdge, document_refusals
 from app.config import Settings
 from app.services import query_pool, vocabularies
@@ -98,7 +98,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         )
         return response
 
-    for module in (models, labels, jobs, search, admin, health, web, docs, explain):
+    for module in (models, variants, labels, jobs, search, admin, health, web, docs, explain):
         app.include_router(module.router)
     generate = app.openapi
 

@@ -52,6 +52,9 @@ class ModelPublic(BaseModel):
         description="bytes the model holds in the data directory: its mesh file, description and cached"
         " thumbnails (GET /models/{id} only; a mesh shared by identical uploads counts for each)",
     )
+    variants: list[dict[str, Any]] | None = Field(
+        None, description="likely variants (model_id, name, relation, confidence), on GET /models/{id} only"
+    )
 
     @classmethod
     def of(cls, m: ModelRecord) -> ModelPublic:
@@ -77,6 +80,10 @@ class ModelAccepted(BaseModel):
     job_id: int | None = Field(description="null when the identical content was already stored")
     status: str = Field(description="the model's status: queued | ready | failed")
     model: ModelPublic
+    variants: list[dict[str, Any]] | None = Field(
+        None, description="likely variants (model_id, name, relation, confidence): known once the model is"
+        " described; GET /models/{id}/variants has the evidence"
+    )
     duplicate_of: int | None = Field(
         None, description="the stored model these bytes already are (its name and label are kept)"
     )
@@ -143,6 +150,49 @@ class SearchHit(BaseModel):
     label: str | None
     distance: float = Field(description="L1 distance between BoF vectors (+ scaled Shape-DNA when fused)")
     rank: int
+    relation: str | None = Field(
+        None, description="the verified variant relation to the query model, when there is one (GET"
+        " /models/{id}/similar): identical | moved | rescaled | mirrored | retriangulated | part_of"
+        " | contains"
+    )
+
+
+class VariantDecision(BaseModel):
+    decision: str = Field(description="keep_both | not_variant")
+    note: str | None = Field(None, max_length=500)
+
+
+class VariantDecisionPublic(VariantDecision):
+    model_id: int
+    other_id: int
+    decided_at: str
+
+
+class VariantPublic(BaseModel):
+    """How another stored model relates to this one, with the numbers behind it."""
+
+    model_id: int = Field(description="the other model")
+    name: str
+    relation: str = Field(
+        description="identical | moved | rescaled | mirrored | retriangulated | part_of (this model is a"
+        " part of the other) | contains (this model holds the other, `copies` times)"
+    )
+    confidence: float = Field(description="in [0, 1]; its meaning is measured by benchmarks.variants_detect")
+    chamfer: float = Field(description="symmetric mean surface distance / bounding-box diagonal")
+    hausdorff: float = Field(description="symmetric largest surface distance / bounding-box diagonal")
+    forward: float = Field(description="fraction of this model's surface within 1 % of the other's")
+    reverse: float = Field(description="fraction of the other's surface within 1 % of this model's")
+    scale: float = Field(description="uniform scale taking this model onto the other")
+    mirrored: bool
+    same_triangles: bool
+    transform: list[list[float]] = Field(description="4 x 4, this model (or its matched part) onto the other")
+    copies: int
+    decision: VariantDecisionPublic | None = Field(None, description="the latest reviewer decision")
+
+
+class VariantsPublic(BaseModel):
+    data: list[VariantPublic]
+    count: int
 
 
 class SearchResponse(BaseModel):

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from app.core.mesh import Mesh, detect_format, load_mesh
 from app.core.pipeline import DescribeParams, ShapeDescription, canonical_mesh, describe_canonical
-from app.services import views
+from app.services import variants, views
 from app.services.clients import current_client
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError, QueueFullError
@@ -117,6 +117,7 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
     timings["load"] = time.perf_counter() - t
     description, fine = describe_and_view(mesh, ctx.settings.describe.params())
     timings.update({f"describe.{k}": v for k, v in description.seconds.items()})
+    found, timings["variants"] = variants.timed_detect(ctx, model.id, mesh)  # advisory: never fails a job
     ctx.blobs.put_description(model.id, description.save)
     views.save_geometry(ctx, model.id, fine)  # what /explain shows, kept now rather than per view
     for _ in range(5):  # encode with the active version; redo if a swap lands meanwhile
@@ -139,6 +140,6 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
             if active is not None and vector is not None:
                 vocab_repo.put_vector(conn, model.id, active.id, vector)
             models_repo.set_ready(conn, model.id, mesh.n_vertices)
-            jobs_repo.mark_done(conn, job.id, timings)
+            jobs_repo.mark_done(conn, job.id, {**timings, "result": {"variants": found}})
         return timings
     raise RuntimeError("the active vocabulary kept changing during ingestion")

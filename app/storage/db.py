@@ -96,6 +96,37 @@ MIGRATIONS: list[str] = [
     ALTER TABLE jobs ADD COLUMN client TEXT NOT NULL DEFAULT '';
     CREATE INDEX jobs_state_client ON jobs(state, client, id);
     """,
+    # 5: variants (storage/variants.py): geometric fingerprints (part 0 = the whole model, 1.. its
+    # objects), the relations verified at ingest, and reviewers' decisions, which are never removed
+    """
+    CREATE TABLE fingerprints (
+        seq INTEGER PRIMARY KEY AUTOINCREMENT,
+        model_id INTEGER NOT NULL REFERENCES models(id) ON DELETE CASCADE,
+        part INTEGER NOT NULL,
+        version INTEGER NOT NULL,
+        vector BLOB NOT NULL,
+        UNIQUE (model_id, part)
+    );
+    CREATE TABLE variant_links (
+        model_id INTEGER NOT NULL REFERENCES models(id) ON DELETE CASCADE,
+        other_id INTEGER NOT NULL REFERENCES models(id) ON DELETE CASCADE,
+        relation TEXT NOT NULL,
+        confidence REAL NOT NULL,
+        evidence TEXT NOT NULL,
+        created_at TEXT NOT NULL,
+        PRIMARY KEY (model_id, other_id)
+    );
+    CREATE INDEX variant_links_other ON variant_links(other_id);
+    CREATE TABLE variant_decisions (
+        seq INTEGER PRIMARY KEY AUTOINCREMENT,
+        low_id INTEGER NOT NULL,
+        high_id INTEGER NOT NULL,
+        decision TEXT NOT NULL CHECK (decision IN ('keep_both', 'not_variant')),
+        note TEXT,
+        created_at TEXT NOT NULL
+    );
+    CREATE INDEX variant_decisions_pair ON variant_decisions(low_id, high_id, seq);
+    """,
 ]
 
 

@@ -24,7 +24,7 @@ from app.api.schemas import (
 )
 from app.api.space import RoomDep
 from app.api.uploads import multipart_body, read_form
-from app.services import catalog, ingestion, metadata, rendering, search, views
+from app.services import catalog, ingestion, metadata, rendering, search, variants, views
 from app.services.errors import InvalidInputError, NotFoundError
 
 router = APIRouter(prefix="/models", tags=["models"])
@@ -72,11 +72,13 @@ async def upload_model(request: Request, runtime: RuntimeDep, _: UploadDep, __: 
     result = await run_in_threadpool(
         ingestion.submit, ctx, data, filename, fields.name, fields.label, fields.metadata
     )
+    known = None if result.created else await run_in_threadpool(variants.brief, ctx, result.model.id)
     body = ModelAccepted(
         model_id=result.model.id,
         job_id=result.job_id,
         status=result.model.status,
         model=ModelPublic.of(result.model),
+        variants=known,  # a new model's are found by its job (its result, then GET /models/{id})
         **_duplicate(result, fields.name, fields.label),
     )
     code = status.HTTP_202_ACCEPTED if result.job_id is not None else status.HTTP_200_OK  # new or retried
@@ -115,7 +117,9 @@ def list_models(
 def get_model(model_id: IdPath, ctx: CtxDep) -> ModelPublic:
     model = catalog.get_model(ctx, model_id)
     stored = ctx.blobs.model_bytes(model.id, model.sha256, model.file_type)
-    return ModelPublic.of(model).model_copy(update={"stored_bytes": stored})
+    return ModelPublic.of(model).model_copy(
+        update={"stored_bytes": stored, "variants": variants.brief(ctx, model_id)}
+    )
 
 
 @router.get("/{model_id}/mesh", responses=ERRORS, response_class=FileResponse)
@@ -143,7 +147,7 @@ def similar(
     label: str | None = None,
 ) -> SearchResponse:
     result = search.similar(runtime.ctx, runtime.live, model_id, k, label)
-    return to_response(result)
+    return to_response(result, variants.relations_with(runtime.ctx, model_id))
 
 
 @router.get("/{model_id}/thumbnail.png", responses=ERRORS, response_class=Response)
@@ -169,10 +173,13 @@ def _header_text(text: str) -> str:
     return "".join(c if 32 <= ord(c) < 127 else "?" for c in text)[:300]
 
 
-def to_response(result: search.SearchResult) -> SearchResponse:
+def to_response(result: search.SearchResult, relations: dict[int, str] | None = None) -> SearchResponse:
+    """relations: {model id: verified variant relation to the query model}, shown on the hits."""
+    relations = relations or {}
     hits = [
         SearchHit(
-            model_id=h.model.id, name=h.model.name, label=h.model.label, distance=h.distance, rank=h.rank
+            model_id=h.model.id, name=h.model.name, label=h.model.label, distance=h.distance, rank=h.rank,
+            relation=relations.get(h.model.id),
         )
         for h in result.hits
     ]

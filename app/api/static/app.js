@@ -100,6 +100,7 @@ function renderResults(container, query, response) {
     },
       el("div", { class: "rank" }, `#${hit.rank}`),
       same ? el("div", { class: "mark same-label", title: `same label as the query (${query.label})` }, "✓ same label") : null,
+      hit.relation ? el("div", { class: "mark variant", title: "a verified variant of the query (Variants above)" }, hit.relation) : null,
       thumb(thumbUrl(hit.model_id), hit.name),
       el("div", { class: "meta" },
         el("div", { class: "name", title: hit.name }, hit.name),
@@ -259,11 +260,14 @@ async function showSimilar(modelId) {
   const out = $("similar-results");
   out.replaceChildren(el("div", { class: "loading" }, el("span", { class: "spinner" }), "Searching…"));
   try {
-    const [model, response] = await Promise.all([
+    const [model, response, variants] = await Promise.all([
       api(`/models/${modelId}`),
       api(`/models/${modelId}/similar?k=${$("k").value}`),
+      api(`/models/${modelId}/variants`),
     ]);
-    renderResults(out, { name: model.name, label: model.label, thumbnail: thumbUrl(model.id), modelId: model.id }, response);
+    const query = { name: model.name, label: model.label, thumbnail: thumbUrl(model.id), modelId: model.id };
+    renderResults(out, query, response);
+    if (variants.count) out.prepend(renderVariants(out, query, variants));
     const close = el("button", { class: "button ghost", onclick: () => out.replaceChildren() }, "Close");
     out.querySelector(".results-head").append(close);
     out.scrollIntoView({ behavior: "smooth", block: "start" });
@@ -271,6 +275,49 @@ async function showSimilar(modelId) {
     out.replaceChildren();
     showError(`Similar models of #${modelId}: ${err.message}`);
   }
+}
+
+// ---- variants: the same model in another form, with the evidence; decisions are recorded, never acted on --
+function describeVariant(v) {
+  const parts = [`${Math.round(v.confidence * 100)} %`];
+  if (v.relation === "rescaled" || Math.abs(Math.log(v.scale)) > 1e-4) parts.push(`× ${v.scale.toPrecision(4)}`);
+  if (v.copies > 1) parts.push(`${v.copies} copies`);
+  if (!v.same_triangles) parts.push(`chamfer ${(v.chamfer * 100).toFixed(2)} %`);
+  return parts.join(" · ");
+}
+
+function renderVariants(container, query, variants) {
+  const cards = variants.data.map((v) => {
+    const status = el("span", { class: "decision" }, v.decision ? v.decision.decision.replace("_", " ") : "");
+    const decide = (decision) => async (event) => {
+      event.stopPropagation();
+      try {
+        const r = await api(`/models/${query.modelId}/variants/${v.model_id}/decision`, {
+          method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify({ decision }),
+        });
+        status.textContent = r.decision.replace("_", " ");
+      } catch (err) { showError(`Could not record the decision: ${err.message}`); }
+    };
+    return el("div", {
+      class: "card hit variant", tabindex: "0", dataset: { modelId: v.model_id },
+      title: "open both in 3D", onclick: () => openCompare(container, query, v),
+    },
+      el("div", { class: "rank" }, v.relation.replace("_", " ")),
+      thumb(thumbUrl(v.model_id), v.name),
+      el("div", { class: "meta" },
+        el("div", { class: "name", title: v.name }, v.name),
+        el("div", { class: "row" }, el("span", { class: "distance" }, describeVariant(v))),
+        el("div", { class: "row" },
+          el("button", { class: "similar-link", onclick: decide("keep_both") }, "keep both"),
+          el("button", { class: "similar-link", onclick: decide("not_variant") }, "not a variant"),
+          status),
+      ),
+    );
+  });
+  return el("section", { class: "results variants" },
+    el("div", { class: "results-head" }, el("h2", {}, `Variants of “${query.name}”`),
+      el("span", { class: "timing" }, "the same model in another form; nothing is deleted or merged")),
+    el("div", { class: "hits" }, cards));
 }
 
 async function loadLabels() {

@@ -1,0 +1,124 @@
+"""Rigid / similarity alignment of two surfaces: principal-axis hypotheses (mirrored ones included),
+refined by ICP, and an exact Procrustes fit on vertex correspondences when the triangulations agree.
+
+A similarity is (scale s, orthogonal R with det +1 or -1, translation t): y = s R x + t.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from app.core.meshdata import Mesh
+from app.core.variants.surface import moments
+
+ICP_ITERATIONS = 20
+DEGENERATE_GAP = 0.05  # relative eigenvalue gap below which two principal axes are interchangeable
+TRIM = 0.9  # ICP fits the closest 90 % of pairs: holes and extra parts do not drag the fit
+
+
+@dataclass(frozen=True)
+class Frame:
+    """Where a surface sits: area centroid (3,), RMS radius, principal axes (3, 3) as columns and their
+    eigenvalues (3,)."""
+
+    centroid: np.ndarray
+    radius: float
+    axes: np.ndarray
+    values: np.ndarray
+
+    def normalise(self, x: np.ndarray) -> np.ndarray:
+        """(n, 3) world -> (n, 3) centred, unit RMS radius, principal-axis coordinates."""
+        return (x - self.centroid) @ self.axes / self.radius
+
+
+def frame(mesh: Mesh) -> Frame:
+    m = moments(mesh)
+    values, axes = m.axes()
+    return Frame(m.centroid, float(np.sqrt(max(values.sum(), 1e-300))), axes, values)
+
+
+@dataclass(frozen=True)
+class Similarity:
+    scale: float
+    rotation: np.ndarray  # (3, 3), det +1 (proper) or -1 (mirrored)
+    translation: np.ndarray  # (3,)
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """x (n, 3) -> s x R^T + t, (n, 3)."""
+        return self.scale * x @ self.rotation.T + self.translation
+
+    @property
+    def mirrored(self) -> bool:
+        return bool(np.linalg.det(self.rotation) < 0)
+
+    def matrix(self) -> np.ndarray:
+        """(4, 4) homogeneous transform."""
+        out = np.eye(4)
+        out[:3, :3] = self.scale * self.rotation
+        out[:3, 3] = self.translation
+        return out
+
+
+def hypotheses(fa: Frame, fb: Frame) -> list[np.ndarray]:
+    """Candidate rotations (3, 3) in normalised coordinates taking A's principal frame onto B's: the 8
+    sign choices of the axes (4 proper, 4 mirrored), and turns about any axis pair whose eigenvalues
+    are too close to order (a cylinder, a cube) in both meshes."""
+    signs = [np.diag(s) for s in np.array(np.meshgrid([1, -1], [1, -1], [1, -1])).T.reshape(-1, 3)]
+    values = np.maximum(0.5 * (fa.values + fb.values), 1e-300)
+    gaps = (values[:-1] - values[1:]) / values[:-1]  # (2,) between axes 0-1 and 1-2
+    extra: list[np.ndarray] = []
+    if gaps.min() < DEGENERATE_GAP:
+        if gaps.max() < DEGENERATE_GAP:  # no preferred axis at all: the rotations of an icosahedron
+            turns = Rotation.create_group("I").as_matrix()
+        else:
+            axis = np.eye(3)[2 if gaps[0] < DEGENERATE_GAP else 0]  # turn about the distinct axis
+            turns = Rotation.from_rotvec(np.outer(np.arange(1, 12) * np.pi / 6, axis)).as_matrix()
+        extra = [t @ s for t in turns for s in (signs[0], signs[-1])]
+    return signs + extra
+
+
+def icp(
+    source: np.ndarray, tree: cKDTree, target: np.ndarray, start: np.ndarray,
+    iterations: int = ICP_ITERATIONS, with_scale: bool = False,
+) -> tuple[Similarity, float]:
+    """Refine x -> start @ x (source (n, 3), target (m, 3) indexed by tree) by trimmed ICP keeping the
+    handedness of `start`; returns the similarity and the final mean distance of the kept pairs."""
+    current = Similarity(1.0, start, np.zeros(3))
+    cost = np.inf
+    for _ in range(iterations):
+        moved = current.apply(source)
+        dist, idx = tree.query(moved, workers=1)
+        keep = dist <= np.partition(dist, int(TRIM * (len(dist) - 1)))[int(TRIM * (len(dist) - 1))]
+        new_cost = float(dist[keep].mean())
+        current = umeyama(source[keep], target[idx[keep]], mirrored=current.mirrored, with_scale=with_scale)
+        if cost - new_cost < 1e-4 * new_cost:  # converged (coordinates have unit RMS radius)
+            cost = min(cost, new_cost)
+            break
+        cost = new_cost
+    return current, cost
+
+
+def umeyama(src: np.ndarray, dst: np.ndarray, mirrored: bool, with_scale: bool = True) -> Similarity:
+    """Least-squares similarity taking src (n, 3) onto dst (n, 3), with det R = -1 if `mirrored`."""
+    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
+    xs, xd = src - mu_s, dst - mu_d
+    u, sig, vt = np.linalg.svd(xd.T @ xs)
+    d = np.ones(3)
+    if (np.linalg.det(u @ vt) < 0) != mirrored:
+        d[2] = -1.0
+    rotation = u @ np.diag(d) @ vt
+    var = float((xs**2).sum())
+    scale = float((sig * d).sum() / var) if with_scale and var > 0 else 1.0
+    return Similarity(scale, rotation, mu_d - scale * rotation @ mu_s)
+
+
+def to_world(fa: Frame, fb: Frame, local: Similarity) -> Similarity:
+    """A similarity between normalised frames -> the one between the meshes' own coordinates."""
+    scale = local.scale * fb.radius / fa.radius
+    rotation = fb.axes @ local.rotation @ fa.axes.T
+    translation = fb.centroid + fb.radius * fb.axes @ local.translation - scale * rotation @ fa.centroid
+    return Similarity(scale, rotation, translation)

@@ -1,0 +1,218 @@
+"""Verify a candidate pair and say how the two meshes are related, with the numbers behind it.
+
+relate(a, b) answers for the query `a` against the stored `b`:
+
+- identical      the same triangles on the same vertices, in place (any format, vertex or face order);
+- moved          the same triangles after a rigid motion;
+- rescaled       the same triangles after a uniform scale (and perhaps a motion): `scale` says by what;
+- mirrored       the same triangles after a reflection (and perhaps a scale and a motion);
+- retriangulated the same surface within a tolerance, other triangles (remeshed, decimated, repaired,
+                 slightly noisy); `scale` and `mirrored` still say how it sits;
+- part_of        every object of `a` is one of the objects of `b` (a part of a plate or kit);
+- contains       every object of `b` is one of the objects of `a` (a plate holding `b`, perhaps copies);
+- similar        none of the above: only the ranking relates them.
+
+Distances are relative to the bounding-box diagonal of `b`. `transform` (4 x 4) maps `a` onto `b`
+(for `contains`, the matched part of `a` onto `b`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from app.core.variants.align import Similarity, hypotheses, icp, to_world, umeyama
+from app.core.variants.prepared import Prepared, face_keys
+
+RELATIONS = ("identical", "moved", "rescaled", "mirrored", "retriangulated", "part_of", "contains", "similar")
+EXACT = ("identical", "moved", "rescaled", "mirrored")
+CHAMFER_MAX = 0.006  # same surface: mean surface distance below 0.6 % of the diagonal ...
+HAUSDORFF_MAX = 0.06  # ... and no point farther than 6 % (a punched hole, a decimated corner)
+COVER_TOLERANCE = 0.01  # a sample is "covered" by the other surface within 1 % of the diagonal
+IDENTITY_TOL = 1e-4  # rotation angle (rad), |log scale| and translation / diagonal read as "none"
+COARSE_POINTS = 256  # ICP on a subsample to rank the hypotheses, then the full samples on the best
+FINE_POINTS = 1024
+MIRROR_MARGIN = 0.8  # an improper fit wins only when its ICP cost is 20 % lower
+REFINE = 2  # hypotheses refined per handedness
+EXACT_ROUNDS = 4
+EXACT_TOL = 1e-4  # same triangles: every vertex within this fraction of the diagonal of its partner
+MAX_PARTS = 8  # objects of a multi-object mesh verified one by one
+
+
+@dataclass(frozen=True)
+class Evidence:
+    relation: str
+    confidence: float
+    chamfer: float  # symmetric mean surface distance / diagonal of b
+    hausdorff: float  # symmetric max surface distance / diagonal of b
+    forward: float  # fraction of a's surface within 1 % of the diagonal of b's
+    reverse: float  # fraction of b's surface within 1 % of the diagonal of a's
+    scale: float
+    mirrored: bool
+    same_triangles: bool
+    transform: list[list[float]]
+    copies: int = 1  # for part_of / contains: how many matching objects the larger one holds
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def relate(a: Prepared, b: Prepared) -> Evidence:
+    """The relation of `a` to `b` (module docstring), by whole surfaces first, then by objects."""
+    whole = verify(a, b)
+    if whole.relation != "similar":
+        return whole
+    na, nb = len(a.parts), len(b.parts)
+    if nb > 1 and nb > na:
+        found = _parts_in(a, b)
+        if found is not None:
+            return found
+    if na > 1 and na > nb:
+        found = _parts_in(b, a)
+        if found is not None:
+            inverse = np.linalg.inv(np.asarray(found.transform))
+            scale = 1.0 / found.scale
+            return Evidence(
+                "contains", found.confidence, found.chamfer, found.hausdorff, found.reverse, found.forward,
+                scale, found.mirrored, found.same_triangles, inverse.tolist(), found.copies,
+            )
+    return whole
+
+
+def verify(a: Prepared, b: Prepared) -> Evidence:
+    """Whole surface against whole surface: the exact relations, retriangulated or similar."""
+    exact = _exact(a, b, Similarity(1.0, np.eye(3), np.zeros(3)))  # in place: no search needed
+    if exact is not None:
+        return _exact_evidence(b, *exact)
+    fa, fb = a.frame, b.frame
+    coarse = a.normalised_samples[:: max(1, len(a.normalised_samples) // COARSE_POINTS)]
+    fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
+    ranked: list[tuple[float, Similarity]] = []
+    for start in hypotheses(fa, fb):
+        fit, cost = icp(coarse, b.normalised_tree, b.normalised_samples, start, iterations=10)
+        ranked.append((cost, fit))
+    ranked.sort(key=lambda r: (r[1].mirrored, r[0]))  # proper first: a symmetric shape is not "mirrored"
+    best_cost = min(r[0] for r in ranked)
+    for cost, fit in ranked:  # the same triangles under any hypothesis about as good as the best
+        if cost <= 2.0 * best_cost + 1e-3:
+            exact = _exact(a, b, to_world(fa, fb, fit))
+            if exact is not None:
+                return _exact_evidence(b, *exact)
+    refined: list[tuple[float, Similarity]] = []
+    for mirrored in (False, True):
+        for _, rough in [r for r in ranked if r[1].mirrored == mirrored][:REFINE]:
+            fit, cost = icp(fine, b.normalised_tree, b.normalised_samples, rough.rotation, with_scale=True)
+            refined.append((cost, to_world(fa, fb, fit)))
+    refined.sort(key=lambda r: r[0])
+    for _, sim in refined[:1]:  # the best fit, polished on the vertices when they are the same
+        exact = _exact(a, b, sim)
+        if exact is not None:
+            return _exact_evidence(b, *exact)
+    proper = min((r for r in refined if not r[1].mirrored), key=lambda r: r[0])
+    improper = min((r for r in refined if r[1].mirrored), key=lambda r: r[0])
+    # a (nearly) mirror-symmetric shape fits both ways: call it mirrored only when clearly better
+    best = improper if improper[0] < MIRROR_MARGIN * proper[0] else proper
+    return _evidence(a, b, best[1])
+
+
+def _exact(a: Prepared, b: Prepared, guess: Similarity) -> tuple[Similarity, float] | None:
+    """The similarity fitted on vertex correspondences, and its largest vertex residual, if a's
+    triangles are b's triangles under it: every vertex of a within EXACT_TOL of a vertex of b,
+    and a's triangles, through that vertex map, exactly b's set of triangles. The map may join two of
+    a's vertices that a file format's rounding made one (a weld), never two distinct ones."""
+    if not 0.98 * b.mesh.n_faces <= a.mesh.n_faces <= 1.02 * b.mesh.n_faces + 2:
+        return None
+    va, vb = a.mesh.vertices, b.mesh.vertices
+    fit = guess
+    # float32 files round each coordinate to 2^-24 of its magnitude, text files to a number of decimals
+    # (6 in many exporters: 5e-7 absolute, 5e-5 of a 1 cm part in metres); 1e-4 of the size covers both
+    for _ in range(EXACT_ROUNDS):  # vertex ICP: from a close guess, the map is right after a round or two
+        dist, idx = b.vertex_tree.query(fit.apply(va), workers=1)
+        if dist.max() > 0.02 * b.diagonal:
+            return None
+        fit = umeyama(va, vb[idx], mirrored=guess.mirrored)
+        residual = float(np.linalg.norm(fit.apply(va) - vb[idx], axis=1).max())
+        extent = np.abs(vb).max() + fit.scale * np.abs(va).max()
+        if residual <= EXACT_TOL * b.diagonal + 2.0**-22 * extent:
+            break
+    else:
+        return None
+    # b's own vertices closer than the tolerance count as one (a format's rounding joins them)
+    weld = b.weld(EXACT_TOL * b.diagonal + 2.0**-22 * extent)  # (n_b,) label
+    if not np.array_equal(_triangles(weld[idx[a.mesh.faces]]), _triangles(weld[b.mesh.faces])):
+        return None
+    return fit, residual
+
+
+def _triangles(faces: np.ndarray) -> np.ndarray:
+    """Distinct triangles as vertex sets, (f', ) int64 keys; a row a weld made degenerate left out."""
+    s = np.sort(faces, axis=1)
+    s = s[(s[:, 0] != s[:, 1]) & (s[:, 1] != s[:, 2])]
+    return np.unique(face_keys(s, int(faces.max(initial=0)) + 1))
+
+
+def _exact_evidence(b: Prepared, sim: Similarity, residual: float) -> Evidence:
+    """Same triangles: each point of a triangle moves by a blend of its corners' residuals, so the
+    largest vertex residual bounds the Hausdorff distance (and the Chamfer distance) exactly."""
+    bound = residual / b.diagonal
+    return Evidence(_exact_relation(sim, b.diagonal), 1.0, bound, bound, 1.0, 1.0, sim.scale, sim.mirrored,
+                    True, sim.matrix().tolist())
+
+
+def _evidence(a: Prepared, b: Prepared, sim: Similarity) -> Evidence:
+    diag = b.diagonal
+    ab = b.distance_to(sim.apply(a.samples[0]))  # (N,) a's samples to b's surface
+    ba = a.distance_to(_inverse(sim).apply(b.samples[0])) * sim.scale  # (N,) b's samples to a's, b's units
+    chamfer = 0.5 * float(ab.mean() + ba.mean()) / diag
+    hausdorff = float(max(ab.max(), ba.max())) / diag
+    forward = float((ab <= COVER_TOLERANCE * diag).mean())
+    reverse = float((ba <= COVER_TOLERANCE * diag).mean())
+    margin = max(chamfer / CHAMFER_MAX, hausdorff / HAUSDORFF_MAX)
+    if margin < 1.0:
+        relation, confidence = "retriangulated", 1.0 - 0.5 * margin
+    else:
+        relation, confidence = "similar", 1.0 - 0.5 / margin
+    return Evidence(relation, round(confidence, 4), chamfer, hausdorff, forward, reverse, sim.scale,
+                    sim.mirrored, False, sim.matrix().tolist())
+
+
+def _exact_relation(sim: Similarity, diagonal: float) -> str:
+    if sim.mirrored:
+        return "mirrored"
+    if abs(np.log(sim.scale)) > IDENTITY_TOL:
+        return "rescaled"
+    angle = np.arccos(np.clip((np.trace(sim.rotation) - 1.0) / 2.0, -1.0, 1.0))
+    if angle > IDENTITY_TOL or np.linalg.norm(sim.translation) > IDENTITY_TOL * diagonal:
+        return "moved"
+    return "identical"
+
+
+def _inverse(sim: Similarity) -> Similarity:
+    rotation = sim.rotation.T
+    return Similarity(1.0 / sim.scale, rotation, -rotation @ sim.translation / sim.scale)
+
+
+def _parts_in(small: Prepared, big: Prepared) -> Evidence | None:
+    """Every object of `small` matched to an object of `big` (whole-surface relation other than
+    similar); the evidence of the largest object's match, with the copies of it that `big` holds."""
+    first: Evidence | None = None
+    for part in small.parts[:MAX_PARTS]:
+        order = np.argsort([np.linalg.norm(part.fingerprint - o.fingerprint) for o in big.parts])
+        matches = []
+        for j in order[: 2 * MAX_PARTS]:
+            ev = verify(part, big.parts[int(j)])
+            if ev.relation != "similar":
+                matches.append(ev)
+            elif matches:
+                break  # candidates come nearest first: the copies are together at the front
+        if not matches:
+            return None
+        if first is None:
+            first = Evidence(**{**matches[0].to_dict(), "copies": len(matches)})
+    assert first is not None
+    # coverage against the whole of `big`, as the whole-surface check measures it
+    whole = _evidence(small, big, Similarity(first.scale, np.asarray(first.transform)[:3, :3] / first.scale,
+                                             np.asarray(first.transform)[:3, 3]))
+    return Evidence("part_of", first.confidence, first.chamfer, first.hausdorff, whole.forward, whole.reverse,
+                    first.scale, first.mirrored, first.same_triangles, first.transform, first.copies)

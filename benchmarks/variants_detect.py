@@ -1,0 +1,295 @@
+"""Variant detection: precision and recall per relation, confidence calibration, lookup and ingest cost.
+
+    python -m benchmarks.variants_detect [--real 6] [--shrec 6] [--full] [--lookup-sizes 100000,1000000]
+    python -m benchmarks.variants_detect --lookup-only --lookup-sizes 100000,1000000
+
+Bases come from the realworld corpus and SHREC'11 (evenly spaced in name order, at most one per
+SHREC'11 class; bases the detector relates to an earlier base are dropped and named). Each base gets
+the variants of benchmarks/variants_detect_kinds.py; other members of a chosen SHREC'11 class are hard
+negatives (must come out `similar`), and every base is looked for in print plates mixing it with two
+other bases (`part_of`). Every query goes through the service's path: fingerprint, index lookup of
+its whole and its objects, verification of at most --verify candidates. A true pair the lookup misses
+counts as `similar`. `--full` takes every readable realworld mesh up to 60k vertices and 30 SHREC'11
+classes, and all of trimesh's writers. The lookup is timed on synthetic fingerprints drawn from the
+measured ones' mean and covariance (FAISS HNSW past 20k; building 1M takes minutes on a busy core).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import time
+from collections import Counter, defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from app.core.mesh import InvalidMeshError, Mesh, load_mesh
+from app.core.variants import RELATIONS, Prepared, relate
+from app.core.variants.collection import RADIUS, K, shortlist
+from app.core.variants.index import FingerprintIndex
+from benchmarks.common import machine, table
+from benchmarks.variants_detect_kinds import plate_member, variants
+
+DATA = Path("/work/shared/datasets")
+SAME_SURFACE = ("decimate:50%", "decimate:10%", "remesh", "noise", "hole")
+
+
+def pick_real(root: Path, n: int, max_vertices: int) -> list[tuple[str, Mesh]]:
+    with open(root / "STATS.csv") as fh:
+        rows = sorted(csv.DictReader(fh), key=lambda r: r["file"])
+    ok = [r for r in rows if r["loader_result"] == "ok" and r["merged_verts"].isdigit()
+          and 20 <= int(r["merged_verts"]) <= max_vertices]
+    out = []
+    for r in ok:
+        try:
+            out.append((f"real/{r['file']}", load_mesh(root / r["file"])))
+        except InvalidMeshError:
+            continue
+    if n < len(out):
+        out = [out[int(i)] for i in np.linspace(0, len(out) - 1, n).round()]
+    return out
+
+
+def pick_shrec(root: Path, n: int, negatives: int) -> tuple[list[tuple[str, Mesh]], dict[str, list]]:
+    by_class: dict[str, list[str]] = defaultdict(list)
+    with open(root / "labels.csv") as fh:
+        for r in csv.DictReader(fh):
+            by_class[r["class"]].append(r["file"])
+    classes = sorted(by_class)
+    chosen = [classes[int(i)] for i in np.linspace(0, len(classes) - 1, min(n, len(classes))).round()]
+    bases, negs = [], {}
+    for c in chosen:
+        files = sorted(by_class[c])
+        bases.append((f"shrec/{files[0]}", load_mesh(root / files[0])))
+        negs[f"shrec/{files[0]}"] = [(f"shrec/{f}", load_mesh(root / f)) for f in files[1: 1 + negatives]]
+    return bases, negs
+
+
+def distinct(bases: list[tuple[str, Mesh]]) -> tuple[list[tuple[str, Prepared]], list[str]]:
+    """Drop a base the detector relates to an earlier one (the corpus has one model in two formats)."""
+    kept: list[tuple[str, Prepared]] = []
+    dropped = []
+    for name, mesh in bases:
+        p = Prepared(mesh)
+        near = [(n, q) for n, q in kept if np.linalg.norm(p.fingerprint - q.fingerprint) <= RADIUS]
+        hit = next(((n, r.relation) for n, q in near if (r := relate(p, q)).relation != "similar"), None)
+        if hit:
+            dropped.append(f"{name} ~ {hit[0]} ({hit[1]})")
+        else:
+            kept.append((name, p))
+    return kept, dropped
+
+
+class Run:
+    """Queries against a stored set through the lookup; predictions per (query, stored) pair."""
+
+    def __init__(self, stored: list[tuple[str, Prepared]]) -> None:
+        self.stored = stored
+        keys, vectors = [], []
+        for i, (_, p) in enumerate(stored):
+            for v in [p.fingerprint] + [q.fingerprint for q in p.parts if q is not p]:
+                keys.append(i)
+                vectors.append(v)
+        self.index = FingerprintIndex()
+        self.index.build(np.array(keys), np.array(vectors))
+        self.pairs: list[dict] = []
+        self.seconds: defaultdict[str, float] = defaultdict(float)
+
+    def query(self, name: str, kind: str, q: Prepared, truth: dict[int, str]) -> None:
+        t = time.perf_counter()
+        vectors = np.array([q.fingerprint] + [p.fingerprint for p in q.parts if p is not q])
+        self.seconds["prepare"] += time.perf_counter() - t
+        t = time.perf_counter()
+        found = shortlist(self.index, vectors)
+        self.seconds["lookup"] += time.perf_counter() - t
+        for i in set(found) | set(truth):
+            expected = truth.get(i, "similar")
+            if i in found:
+                t = time.perf_counter()
+                ev = relate(q, self.stored[i][1])
+                self.seconds["verify"] += time.perf_counter() - t
+                got, conf, ch, hd = ev.relation, ev.confidence, ev.chamfer, ev.hausdorff
+            else:
+                got, conf, ch, hd = "similar", 1.0, float("nan"), float("nan")
+            # area / diagonal^2 against the stored one's: a decimation that lost thin parts shows here
+            stored = self.stored[i][1]
+            area = (q.mesh.area() / q.diagonal**2) / (stored.mesh.area() / stored.diagonal**2)
+            self.pairs.append({"query": name, "kind": kind, "stored": self.stored[i][0], "truth": expected,
+                               "area_ratio": area,
+                               "got": got, "confidence": conf, "looked_up": i in found,
+                               "chamfer": ch, "hausdorff": hd})
+
+
+def mirror_truth(variant: Prepared, base: Prepared) -> str:
+    """A mirror image the exact test fits by a proper motion (a mirror-symmetric base with a symmetric
+    triangulation) is that motion: 'mirrored' otherwise."""
+    ev = relate(variant, base)
+    return ev.relation if ev.relation in ("identical", "moved") else "mirrored"
+
+
+def scores(pairs: list[dict]) -> list[dict]:
+    rows = []
+    for rel in RELATIONS:
+        truth = [p for p in pairs if p["truth"] == rel]
+        said = [p for p in pairs if p["got"] == rel]
+        hits = sum(p["got"] == rel for p in truth)
+        rows.append({"relation": rel, "true pairs": len(truth), "said": len(said), "correct": hits,
+                     "precision": hits / len(said) if said else float("nan"),
+                     "recall": hits / len(truth) if truth else float("nan")})
+    return rows
+
+
+def calibration(pairs: list[dict]) -> list[dict]:
+    edges = [0.5, 0.6, 0.7, 0.8, 0.9, 0.99, 1.0001]
+    rows = []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        b = [p for p in pairs if lo <= p["confidence"] < hi and p["looked_up"]]
+        if b:
+            label = f"[{lo:.2f}, {min(hi, 1.0):.2f}{']' if hi > 1 else ')'}"
+            rows.append({"confidence": label, "pairs": len(b),
+                         "right": sum(p["got"] == p["truth"] for p in b) / len(b),
+                         "not similar said": sum(p["got"] != "similar" for p in b)})
+    return rows
+
+
+def lookup_cost(fingerprints: np.ndarray, sizes: list[int], rng: np.random.Generator) -> list[dict]:
+    """p50/p95 of one k-NN query on n synthetic fingerprints (Gaussian with the measured mean and
+    covariance), and the HNSW answer's recall of the exact K neighbours (the service asks K)."""
+    import faiss
+
+    mean, cov = fingerprints.mean(axis=0), np.cov(fingerprints.T) + 1e-6 * np.eye(fingerprints.shape[1])
+    rows = []
+    for n in sizes:
+        data = np.abs(rng.multivariate_normal(mean, cov, size=n)).astype(np.float32)
+        index = FingerprintIndex()
+        t = time.perf_counter()
+        index.build(np.arange(n), data)
+        build = time.perf_counter() - t
+        queries = fingerprints[rng.integers(0, len(fingerprints), 500)]
+        times = []
+        for q in queries:
+            t = time.perf_counter()
+            index.search(q[None], K)
+            times.append(time.perf_counter() - t)
+        exact = faiss.IndexFlatL2(data.shape[1])
+        exact.add(data)
+        _, truth = exact.search(queries[:200].astype(np.float32), K)
+        got, _ = index.search(queries[:200], K)
+        recall = np.mean([len(set(a) & set(b)) / K for a, b in zip(got, truth, strict=True)])
+        rows.append({"fingerprints": n, "build s": build, "p50 ms": 1e3 * np.percentile(times, 50),
+                     "p95 ms": 1e3 * np.percentile(times, 95), "recall@K": float(recall)})
+    return rows
+
+
+def ingest_cost(bases: list[tuple[str, Prepared]], run: Run) -> dict:
+    """Per realworld base: describe (the ingest job's numerical work) against the variant step
+    (fingerprints of the whole and its objects, lookup, verification of the candidates prepared
+    afresh; the service also parses each candidate's file, not counted here)."""
+    from app.config import Settings
+    from app.core.pipeline import describe
+
+    params = Settings().describe.params()
+    describe_s = variant_s = 0.0
+    for name, p in bases:
+        if not name.startswith("real/"):
+            continue
+        mesh = p.mesh
+        t = time.perf_counter()
+        describe(mesh, params)
+        describe_s += time.perf_counter() - t
+        t = time.perf_counter()
+        fresh = Prepared(Mesh(mesh.vertices.copy(), mesh.faces.copy()))
+        vectors = np.array([fresh.fingerprint] + [q.fingerprint for q in fresh.parts if q is not fresh])
+        for i in shortlist(run.index, vectors):
+            stored = run.stored[i][1].mesh  # prepared afresh, as the service loads a candidate from its file
+            relate(fresh, Prepared(Mesh(stored.vertices, stored.faces)))
+        variant_s += time.perf_counter() - t
+    return {"describe s": describe_s, "variant step s": variant_s,
+            "overhead": variant_s / describe_s if describe_s else float("nan")}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--real", type=int, default=6, help="realworld bases (default 6)")
+    ap.add_argument("--shrec", type=int, default=6, help="SHREC'11 bases, one per class (default 6)")
+    ap.add_argument("--negatives", type=int, default=3, help="hard negatives per SHREC'11 base")
+    ap.add_argument("--full", action="store_true", help="all readable realworld meshes, 30 classes")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--lookup-sizes", default="100000",
+                    help="synthetic collection sizes for the lookup timing (1000000 builds for minutes)")
+    ap.add_argument("--lookup-only", action="store_true", help="only the lookup timing")
+    ap.add_argument("--no-ingest", action="store_true", help="skip the describe timing")
+    ap.add_argument("--pairs", help="write every pair (truth, verdict, distances) to this JSON file")
+    ap.add_argument("--show-errors", action="store_true", help="list every wrong pair")
+    args = ap.parse_args(argv)
+    import faiss
+
+    faiss.omp_set_num_threads(1)
+    rng = np.random.default_rng(args.seed)
+    real = pick_real(DATA / "realworld", 10**6 if args.full else args.real,
+                     60_000 if args.full else 20_000)
+    shrec, negatives = pick_shrec(DATA / "shrec11-simplified", 30 if args.full else args.shrec,
+                                  args.negatives)
+    bases, dropped = distinct(real + shrec)
+    sizes = [int(s) for s in args.lookup_sizes.split(",") if s]
+    if args.lookup_only:
+        fps = np.array([p.fingerprint for _, p in bases])
+        print(table(lookup_cost(fps, sizes, rng), title="candidate lookup, one query, 1 thread"))
+        return 0
+    run = Run(bases)
+    for i, (name, base) in enumerate(bases):
+        for kind, mesh, expected in variants(base.mesh, rng, args.full):
+            q = Prepared(mesh)
+            truth = mirror_truth(q, base) if kind == "mirror" else expected
+            run.query(name, kind, q, {i: truth})
+        for neg_name, mesh in negatives.get(name, []):
+            run.query(neg_name, "negative", Prepared(mesh), {})
+    # every base inside print plates mixing it with other bases
+    plates: list[tuple[str, Prepared]] = []
+    members: list[set[int]] = []
+    for i in range(len(bases)):
+        pick = [i, *rng.choice([j for j in range(len(bases)) if j != i], 2, replace=False)]
+        others = [bases[j][1].mesh for j in pick[1:]]
+        plates.append((f"plate{i}", Prepared(plate_member(bases[i][1].mesh, others, rng))))
+        members.append({int(j) for j in pick})
+    plate_run = Run(plates)
+    for i, (name, prepared) in enumerate(bases):
+        plate_run.query(name, "in-plate", prepared, {j: "part_of" for j, m in enumerate(members) if i in m})
+    pairs = run.pairs + plate_run.pairs
+    n_real = sum(n.startswith("real/") for n, _ in bases)
+    print(f"{len(bases)} bases ({n_real} realworld), {len(pairs)} pairs;"
+          f" dropped as related to an earlier base: {dropped or 'none'}")
+    print(table(scores(pairs), title="\nper relation (pairs verified or missed by the lookup)"))
+    by_kind = defaultdict(list)
+    for p in pairs:
+        if p["truth"] != "similar" or p["kind"] == "negative":
+            by_kind[p["kind"].split(":")[0] if p["kind"].startswith("export") else p["kind"]].append(p)
+    print(table([{"kind": k, "pairs": len(v), "right": sum(p["got"] == p["truth"] for p in v) / len(v),
+                  "lookup missed": sum(not p["looked_up"] for p in v),
+                  "area kept <0.9": sum(p["area_ratio"] < 0.9 for p in v) if k in SAME_SURFACE else "-",
+                  "said": dict(Counter(p["got"] for p in v))} for k, v in by_kind.items()], title="per kind"))
+    negs = [p for p in pairs if p["kind"] == "negative"]
+    print(f"hard negatives: {len(negs)} pairs, {sum(p['got'] != 'similar' for p in negs)} called anything but"
+          " similar\n")
+    print(table(calibration(pairs), title="confidence calibration (verified pairs: fraction right)"))
+    seconds = {k: run.seconds[k] + plate_run.seconds[k] for k in ("prepare", "lookup", "verify")}
+    queries = len({(p["query"], p["kind"]) for p in pairs})
+    print(f"per query: prepare {seconds['prepare'] / queries * 1e3:.0f} ms, lookup"
+          f" {seconds['lookup'] / queries * 1e3:.2f} ms, verify {seconds['verify'] / queries * 1e3:.0f} ms\n")
+    if args.pairs:
+        Path(args.pairs).write_text(json.dumps(pairs, indent=1))
+    if args.show_errors:
+        print(table([p for p in pairs if p["got"] != p["truth"]], title="wrong pairs"))
+    if not args.no_ingest:
+        print(table([ingest_cost(bases, run)], title="ingest cost on the realworld bases"))
+    if sizes:
+        fps = np.array([p.fingerprint for _, p in bases] + [p.fingerprint for _, p in plates])
+        print(table(lookup_cost(fps, sizes, rng), title="candidate lookup, one query, 1 thread"))
+    print(machine())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,80 @@
+"""The variants over HTTP: upload a model and a rescaled, moved copy of it; the job result, the model,
+GET /models/{id}/variants and /similar name the relation; a reviewer's decision is guarded and kept."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+from fastapi.testclient import TestClient
+
+from app.main import create_app
+from tests.conftest import make_settings, wait_for, wait_job
+
+
+def _upload(client, name: str, data: bytes, **headers):
+    return client.post("/models", files={"file": (name, data)}, headers=headers)
+
+
+def test_variant_found_at_ingest_shown_and_decided(data_dir, corpus):
+    path, _ = corpus.held_out[0]
+    tm = trimesh.load(path, process=False)
+    copy = tm.copy()
+    copy.apply_scale(25.4)
+    copy.apply_translation([100.0, 0.0, 0.0])  # in inches, moved: other bytes, another format
+    with TestClient(create_app(make_settings(data_dir))) as client:
+        first = _upload(client, path.name, path.read_bytes())
+        assert first.status_code == 202 and first.json()["variants"] is None  # found by the job
+        a = first.json()["model_id"]
+        assert wait_job(client, first.json()["job_id"])["state"] == "done"
+        second = _upload(client, "inches.stl", copy.export(file_type="stl"))
+        b = second.json()["model_id"]
+        job = wait_job(client, second.json()["job_id"])
+        assert job["state"] == "done"
+        assert [(v["model_id"], v["relation"]) for v in job["result"]["variants"]] == [(a, "rescaled")]
+        assert job["timings"]["variants"] > 0
+
+        model = client.get(f"/models/{b}").json()
+        assert model["variants"] == job["result"]["variants"]
+        listed = client.get(f"/models/{a}/variants").json()
+        assert listed["count"] == 1
+        v = listed["data"][0]
+        assert (v["model_id"], v["relation"], v["same_triangles"]) == (b, "rescaled", True)
+        assert abs(v["scale"] - 25.4) < 1e-4 and v["decision"] is None
+        assert np.allclose(np.asarray(v["transform"])[:3, 3], [100.0, 0.0, 0.0], atol=1e-3)
+        assert client.get("/models/999999/variants").status_code == 404
+
+        def hit():  # the live index picks the new vector up on its next poll
+            r = client.get(f"/models/{a}/similar", params={"k": 20})
+            rows = {h["model_id"]: h for h in r.json()["data"]} if r.status_code == 200 else {}
+            return rows if b in rows else None
+
+        rows = wait_for(hit, timeout_s=30)
+        assert rows[b]["relation"] == "rescaled"
+        assert all(h["relation"] is None for i, h in rows.items() if i != b)
+
+        # same bytes again: the existing model, with its variants in the reply
+        again = _upload(client, "inches-again.stl", copy.export(file_type="stl"))
+        assert again.status_code == 200 and again.json()["variants"][0]["model_id"] == a
+
+        url = f"/models/{a}/variants/{b}/decision"
+        r = client.post(url, json={"decision": "keep_both", "note": "left and right"})
+        assert r.status_code == 201, r.text
+        assert r.json()["decision"] == "keep_both"
+        assert client.post(url, json={"decision": "merge"}).status_code == 422
+        same = client.post(f"/models/{a}/variants/{a}/decision", json={"decision": "keep_both"})
+        assert same.status_code == 422
+        assert client.post(f"/models/{a}/variants/999999/decision",
+                           json={"decision": "keep_both"}).status_code == 404
+        kept = client.get(f"/models/{b}/variants").json()["data"][0]
+        assert kept["decision"]["decision"] == "keep_both" and kept["decision"]["note"] == "left and right"
+        assert client.get(f"/models/{a}").status_code == 200 and client.get(f"/models/{b}").status_code == 200
+
+
+def test_decision_needs_the_write_token_when_one_is_set(data_dir):
+    settings = make_settings(data_dir, api_token="writer")
+    with TestClient(create_app(settings)) as client:
+        ids = [m["id"] for m in client.get("/models", params={"limit": 2}).json()["data"]]
+        url = f"/models/{ids[0]}/variants/{ids[1]}/decision"
+        assert client.post(url, json={"decision": "not_variant"}).status_code == 401
+        r = client.post(url, json={"decision": "not_variant"}, headers={"Authorization": "Bearer writer"})
+        assert r.status_code == 201

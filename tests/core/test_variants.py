@@ -1,0 +1,157 @@
+"""How two meshes are related: each relation on small generated meshes, with its evidence, and the
+pairs that must not match."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from app.core.mesh import Mesh, load_mesh
+from app.core.variants import Prepared, relate
+from tests.core.conftest import SHREC
+
+
+def _hull(seed: int, n: int = 80) -> Mesh:
+    points = np.random.default_rng(seed).normal(size=(n, 3)) * [1.0, 0.6, 0.35]
+    tm = trimesh.convex.convex_hull(points)
+    return Mesh(np.asarray(tm.vertices, float), np.asarray(tm.faces, np.int64))
+
+
+def _plate(meshes: list[Mesh]) -> Mesh:
+    step = 3.0 * max(float(np.ptp(m.vertices, axis=0).max()) for m in meshes)
+    v = [m.vertices + [i * step, 0, 0] for i, m in enumerate(meshes)]
+    offsets = np.cumsum([0] + [m.n_vertices for m in meshes[:-1]])
+    return Mesh(np.vstack(v), np.vstack([m.faces + o for m, o in zip(meshes, offsets, strict=True)]))
+
+
+def _relate(a: Mesh, b: Mesh):
+    return relate(Prepared(a), Prepared(b))
+
+
+@pytest.fixture(scope="module")
+def hull() -> Mesh:
+    return _hull(7)
+
+
+def test_identical_whatever_the_vertex_and_face_order(hull) -> None:
+    rng = np.random.default_rng(1)
+    perm = rng.permutation(hull.n_vertices)
+    faces = np.argsort(perm)[hull.faces][rng.permutation(hull.n_faces)][:, [1, 2, 0]]
+    shuffled = Mesh(hull.vertices[perm], faces)
+    ev = _relate(shuffled, hull)
+    assert (ev.relation, ev.same_triangles, ev.confidence) == ("identical", True, 1.0)
+    np.testing.assert_allclose(ev.transform, np.eye(4), atol=1e-9)
+    assert ev.hausdorff < 1e-9
+
+
+def test_identical_through_a_float32_file(hull) -> None:
+    data = trimesh.Trimesh(hull.vertices * 1000 + 5000, hull.faces, process=False).export(file_type="stl")
+    stored = Mesh(hull.vertices * 1000 + 5000, hull.faces)
+    assert _relate(load_mesh(data, "stl"), stored).relation == "identical"
+
+
+def test_identical_through_a_six_decimal_text_file(hull) -> None:
+    """A 1 cm part in metres written with 6 decimals (as many exporters do) is still the same mesh."""
+    small = Mesh(hull.vertices * 0.004, hull.faces)
+    text = "".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in small.vertices)
+    text += "".join(f"f {a} {b} {c}\n" for a, b, c in small.faces + 1)
+    assert _relate(load_mesh(text.encode(), "obj"), small).relation == "identical"
+
+
+def test_moved_with_the_transform_that_maps_it(hull, random_rotation) -> None:
+    rotation, shift = random_rotation(5), np.array([3.0, -2.0, 7.0])
+    moved = Mesh(hull.vertices @ rotation.T + shift, hull.faces)
+    ev = _relate(hull, moved)
+    assert ev.relation == "moved" and not ev.mirrored
+    t = np.asarray(ev.transform)
+    np.testing.assert_allclose(hull.vertices @ t[:3, :3].T + t[:3, 3], moved.vertices, atol=1e-9)
+    assert ev.scale == pytest.approx(1.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("factor", [25.4, 0.001])
+def test_rescaled_with_its_factor(hull, random_rotation, factor) -> None:
+    ev = _relate(hull, Mesh(factor * hull.vertices @ random_rotation(2).T, hull.faces))
+    assert ev.relation == "rescaled"
+    assert ev.scale == pytest.approx(factor, rel=1e-9)
+
+
+def test_mirrored_asymmetric_shape(hull, random_rotation) -> None:
+    mirrored = Mesh((hull.vertices * [-1, 1, 1]) @ random_rotation(3).T, hull.faces[:, ::-1])
+    ev = _relate(mirrored, hull)
+    assert ev.relation == "mirrored" and ev.mirrored
+    assert np.linalg.det(np.asarray(ev.transform)[:3, :3]) == pytest.approx(-1.0)
+
+
+def test_mirror_of_a_mirror_symmetric_mesh_is_not_called_mirrored(random_rotation) -> None:
+    """The icosphere's triangles are symmetric under x -> -x: its mirror image is the mesh itself,
+    and turned, a motion of it."""
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    mesh = Mesh(np.asarray(sphere.vertices) * [1.0, 2.0, 3.0], np.asarray(sphere.faces, np.int64))
+    mirror = Mesh(mesh.vertices * [-1, 1, 1], mesh.faces[:, ::-1])
+    assert _relate(mirror, mesh).relation == "identical"
+    ev = _relate(Mesh(mirror.vertices @ random_rotation(8).T, mirror.faces), mesh)
+    assert ev.relation == "moved" and not ev.mirrored
+
+
+def test_retriangulated_subdivided_and_noisy(hull, random_rotation) -> None:
+    v, f = trimesh.remesh.subdivide(hull.vertices, hull.faces)
+    ev = _relate(Mesh(v @ random_rotation(4).T, f), hull)
+    assert ev.relation == "retriangulated" and not ev.same_triangles
+    assert ev.chamfer < 1e-3 and ev.hausdorff < 0.01  # midpoints lie exactly on the surface
+    assert ev.confidence > 0.8
+    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    noisy = Mesh(v + np.random.default_rng(0).normal(scale=0.001 * diag, size=v.shape), f)
+    assert _relate(noisy, hull).relation == "retriangulated"
+
+
+def test_retriangulated_says_whether_it_is_mirrored(hull) -> None:
+    v, f = trimesh.remesh.subdivide(hull.vertices, hull.faces)
+    ev = _relate(Mesh(v * [1, 1, -1], f[:, ::-1]), hull)
+    assert (ev.relation, ev.mirrored) == ("retriangulated", True)
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    ellipsoid = Mesh(np.asarray(sphere.vertices) * [1.0, 2.0, 3.0], np.asarray(sphere.faces, np.int64))
+    v, f = trimesh.remesh.subdivide(ellipsoid.vertices, ellipsoid.faces)
+    ev = _relate(Mesh(v * [-1, 1, 1], f[:, ::-1]), ellipsoid)  # symmetric: a motion fits as well
+    assert (ev.relation, ev.mirrored) == ("retriangulated", False)
+
+
+def test_part_of_a_plate_and_the_plate_contains_its_copies(hull) -> None:
+    other = _hull(11)
+    mixed = _plate([other, hull, _hull(12)])
+    ev = _relate(hull, mixed)
+    assert ev.relation == "part_of" and ev.copies == 1
+    assert ev.forward > 0.99 and ev.reverse < 0.5  # all of the part is in the plate, not the reverse
+    copies = _relate(_plate([hull] * 3), hull)
+    assert copies.relation == "contains" and copies.copies == 3
+
+
+def test_similar_shapes_are_only_similar(hull) -> None:
+    ev = _relate(_hull(8), hull)
+    assert ev.relation == "similar"
+    assert ev.chamfer > 0.006
+
+
+def test_quantisation_grid_collision_is_not_identical(hull) -> None:
+    """Every vertex moved by less than a 1e-3 grid cell: a grid hash would call them the same file;
+    the geometry is close (retriangulated) but never identical."""
+    step = 1e-3 * float(np.ptp(hull.vertices, axis=0).max())
+    snapped = np.round(hull.vertices / step) * step
+    assert _relate(Mesh(snapped, hull.faces), hull).relation == "retriangulated"
+    # the same vertices joined differently are another surface
+    box = trimesh.creation.box([1.0, 1.0, 1.0])
+    v, f = np.asarray(box.vertices), np.asarray(box.faces, np.int64)
+    flipped = f.copy()
+    flipped[[0, 1]] = [[f[0, 0], f[0, 1], f[1, 1]], [f[0, 0], f[1, 1], f[1, 2]]]  # swap one quad's diagonal
+    ev = _relate(Mesh(v, flipped), Mesh(v, f))
+    assert ev.relation != "identical" and not ev.same_triangles
+
+
+@pytest.mark.parametrize("pair", [("ants", 0, 1), ("ants", 0, 2), ("hand", 0, 1)])
+def test_two_members_of_one_shrec_class_are_not_variants(pair) -> None:
+    cls, i, j = pair
+    files = sorted(p for p in (SHREC / cls).rglob("*.obj"))
+    if len(files) <= j:
+        pytest.fail(f"SHREC'11 missing at {SHREC}")
+    ev = _relate(load_mesh(files[i]), load_mesh(files[j]))
+    assert ev.relation == "similar"
