@@ -29,10 +29,10 @@ from app.core.mesh import InvalidMeshError, Mesh, load_mesh
 from app.core.variants import RELATIONS, Prepared, relate
 from app.core.variants.collection import RADIUS, K, shortlist
 from app.core.variants.index import FingerprintIndex
+from app.datasets import locate
 from benchmarks.common import machine, table
 from benchmarks.variants_detect_kinds import plate_member, variants
 
-DATA = Path("/work/shared/datasets")
 SAME_SURFACE = ("decimate:50%", "decimate:10%", "remesh", "noise", "hole")
 
 
@@ -228,9 +228,14 @@ def main(argv: list[str] | None = None) -> int:
 
     faiss.omp_set_num_threads(1)
     rng = np.random.default_rng(args.seed)
-    real = pick_real(DATA / "realworld", 10**6 if args.full else args.real,
+    try:  # SHAPEBAG_DATASETS (app/datasets/locate.py): stop, naming what is missing, without them
+        realworld, shrec11 = locate.require("realworld"), locate.require("shrec11-simplified")
+    except locate.DatasetMissing as exc:
+        print(f"variants_detect: {exc}")
+        return 2
+    real = pick_real(realworld, 10**6 if args.full else args.real,
                      60_000 if args.full else 20_000)
-    shrec, negatives = pick_shrec(DATA / "shrec11-simplified", 30 if args.full else args.shrec,
+    shrec, negatives = pick_shrec(shrec11, 30 if args.full else args.shrec,
                                   args.negatives)
     bases, dropped = distinct(real + shrec)
     sizes = [int(s) for s in args.lookup_sizes.split(",") if s]

@@ -71,10 +71,11 @@ def test_variant_found_at_ingest_shown_and_decided(data_dir, corpus):
 
 
 def test_decision_needs_the_write_token_when_one_is_set(data_dir):
-    settings = make_settings(data_dir, api_token="writer")
+    writer = "writer-" + "w" * 32  # tokens are 32 characters or more
+    settings = make_settings(data_dir, api_token=writer)
     with TestClient(create_app(settings)) as client:
         ids = [m["id"] for m in client.get("/models", params={"limit": 2}).json()["data"]]
         url = f"/models/{ids[0]}/variants/{ids[1]}/decision"
         assert client.post(url, json={"decision": "not_variant"}).status_code == 401
-        r = client.post(url, json={"decision": "not_variant"}, headers={"Authorization": "Bearer writer"})
+        r = client.post(url, json={"decision": "not_variant"}, headers={"Authorization": f"Bearer {writer}"})
         assert r.status_code == 201

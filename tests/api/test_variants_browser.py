@@ -9,7 +9,10 @@ import trimesh
 from tests.api.test_web_browser import CHROMIUM, launch, served  # noqa: F401 (fixture)
 from tests.conftest import wait_for
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (apt-get install -y chromium)")
+pytestmark = [
+    pytest.mark.slow,  # a real browser: the second tier (make test-all)
+    pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (apt-get install -y chromium)"),
+]
 
 
 def test_variants_view_shows_the_relation_and_records_a_decision(served: str, corpus) -> None:  # noqa: F811

@@ -300,7 +300,8 @@ def test_every_known_choice_is_accepted():
 
 
 def test_the_fingerprint_lists_every_parameter_but_the_solver_sorted_with_the_filter_last():
-    p = DescribeParams(k=17, keypoint_filter=KeypointFilter(enabled=True, min_points=9))
+    flt = KeypointFilter(enabled=True, min_points=9)
+    p = DescribeParams(k=17, smoothing_target=0.03, keypoint_filter=flt)
     parts = p.fingerprint().split(";")
     plain = sorted(f.name for f in dataclasses.fields(DescribeParams)
                    if f.name not in ("solver", "keypoint_filter"))
@@ -309,6 +310,8 @@ def test_the_fingerprint_lists_every_parameter_but_the_solver_sorted_with_the_fi
     assert "k=17" in parts and "m=100" in parts and "laplacian=intrinsic" in parts
     assert "kf.enabled=True" in parts and "kf.min_points=9" in parts and "kf.min_contrast=0.001" in parts
     assert not any(part.startswith("solver") for part in parts)
+    # fixed smoothing (target 0) names a description as before the adaptive option existed
+    assert "smoothing_target" not in DescribeParams(k=17).fingerprint()
 
 
 def test_the_fingerprint_changes_with_everything_but_the_solver():
@@ -317,7 +320,7 @@ def test_the_fingerprint_changes_with_everything_but_the_solver():
     assert DescribeParams(solver="sparse").fingerprint() == base.fingerprint()
     for change in ({"k": 299}, {"m": 99}, {"target_vertices": 999}, {"smoothing": 11}, {"remesh": True},
                    {"subdivision": "loop"}, {"smoothing_weights": "cotangent"}, {"laplacian": "cotangent"},
-                   {"time_range": "weyl"}):
+                   {"time_range": "weyl"}, {"smoothing_target": 0.04}):
         assert dataclasses.replace(base, **change).fingerprint() != base.fingerprint(), change
     for change in ({"enabled": True}, {"min_persistence": 0.2}, {"min_contrast": 0.01}, {"min_points": 5}):
         flt = dataclasses.replace(base.keypoint_filter, **change)
