@@ -120,6 +120,7 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
     found, timings["variants"] = variants.timed_detect(ctx, model.id, mesh)  # advisory: never fails a job
     ctx.blobs.put_description(model.id, description.save)
     views.save_geometry(ctx, model.id, fine)  # what /explain shows, kept now rather than per view
+    views.save_thumbnail(ctx, model.id, mesh)  # what a results page shows first, likewise
     for _ in range(5):  # encode with the active version; redo if a swap lands meanwhile
         t = time.perf_counter()
         with ctx.db.read() as conn:

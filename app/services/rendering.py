@@ -37,6 +37,11 @@ def _png(mesh: Mesh, size: int) -> bytes:
         raise InvalidInputError(f"the mesh cannot be rendered: {exc}") from exc
 
 
+def render_mesh(mesh: Mesh, size: int = PREVIEW_SIZE) -> bytes:
+    """A loaded mesh's thumbnail (at ingest, in a worker process)."""
+    return _png(mesh, check_size(size))
+
+
 def render_upload(data: bytes, file_type: str, max_vertices: int, size: int = PREVIEW_SIZE) -> bytes:
     """An uploaded mesh (the web page's query preview): refused as an upload would be (InvalidMeshError)."""
     return _png(load_upload(data, file_type, max_vertices), size)

@@ -51,6 +51,20 @@ def save_geometry(ctx: ServiceContext, model_id: int, fine: Mesh) -> None:
         _keep_failure(ctx, model_id, "geometry", f"its geometry could not be prepared: {exc}")
 
 
+def save_thumbnail(
+    ctx: ServiceContext, model_id: int, mesh: Mesh, size: int = rendering.PREVIEW_SIZE
+) -> None:
+    """At ingest: the thumbnail a results page shows, so a first Browse loads pictures, not renders
+    (ten at once from one page would wait on the render budget). A failure is kept as on a view."""
+    what = f"thumbnail-{size}"
+    try:
+        png = rendering.render_mesh(mesh, size)
+    except Exception as exc:  # a view's failure must never fail the ingest
+        _keep_failure(ctx, model_id, what, _reason(exc))
+        return
+    atomic_write(ctx.blobs.thumbnail_path(model_id, size), png)
+
+
 def _write_geometry(path: Path, g: Geometry) -> None:
     def write(tmp: Path) -> None:
         with open(tmp, "wb") as fh:

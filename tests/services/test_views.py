@@ -1,5 +1,5 @@
-"""What a model needs to be viewed is computed once and kept (issue 34): the explain geometry at ingest
-(else on first use), thumbnails on first use; a failure is kept too and answered at once (a placeholder
+"""What a model needs to be viewed is computed once and kept (issue 34): the explain geometry and the
+results page's thumbnail at ingest (else on first use), other thumbnail sizes on first use; a failure is kept too and answered at once (a placeholder
 image, or a 422 naming the reason), never computed again per view. Pool calls are counted by wrapping
 the runtime's pool; the work itself runs in real pool processes."""
 
@@ -15,7 +15,7 @@ import trimesh
 from fastapi.testclient import TestClient
 from PIL import Image
 
-from app.core.mesh import load_mesh
+from app.core.mesh import Mesh, load_mesh
 from app.core.pipeline import canonical_mesh
 from app.main import create_app
 from app.services import catalog, ingestion, views
@@ -132,6 +132,37 @@ def test_a_rendered_thumbnail_is_kept_and_deleted_with_its_model(served, pool_ca
     catalog.delete_model(client.app.state.runtime.ctx, client.app.state.runtime.live, model["id"])
     assert not list((data / "views").glob(f"{model['id']}.*"))
     assert not list((data / "thumbnails").glob(f"{model['id']}-*"))
+
+
+def test_the_results_pages_thumbnail_is_rendered_at_ingest(served, pool_calls):
+    client, data = served
+    model = _ready(client, 4)
+    kept = data / "thumbnails"
+    assert list(kept.glob(f"{model['id']}-*")), "no thumbnail kept by the ingest"
+    r = client.get(f"/models/{model['id']}/thumbnail.png")  # the page's size
+    assert r.status_code == 200 and views.PLACEHOLDER_HEADER not in r.headers
+    assert Image.open(io.BytesIO(r.content)).size == (256, 256)
+    assert pool_calls == []  # read from disk: a first Browse waits on no render
+
+
+def test_a_thumbnail_that_fails_at_ingest_is_kept_as_a_failure(served):
+    client, data = served
+    ctx = client.app.state.runtime.ctx
+    slivers = _slivers_across_the_frame()
+    model_id = ingestion.submit(ctx, obj_text(slivers.vertices, slivers.faces), "slivers.obj").model.id
+    views.save_thumbnail(ctx, model_id, slivers)  # as the ingest does: refused by the renderer's budget
+    failed = data / "views" / f"{model_id}.thumbnail-256.failed"
+    assert failed.is_file() and "cannot be rendered" in failed.read_text()
+    assert not (data / "thumbnails" / f"{model_id}-256.png").exists()
+    r = client.get(f"/models/{model_id}/thumbnail.png")
+    assert r.status_code == 200 and "cannot be rendered" in r.headers[views.PLACEHOLDER_HEADER]
+    catalog.delete_model(ctx, client.app.state.runtime.live, model_id)
+
+
+def _slivers_across_the_frame(n: int = 20_000) -> Mesh:
+    a = np.random.default_rng(0).normal(size=(n, 3)) * 1e-3
+    v = np.concatenate([a, a + [1.0, 1.0, 0.3], a + [1.0001, 1.0, 0.3]])
+    return Mesh(v, np.arange(3 * n).reshape(3, n).T)
 
 
 def test_concurrent_first_views_share_one_computation(served):
