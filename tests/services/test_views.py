@@ -1,7 +1,8 @@
 """What a model needs to be viewed is computed once and kept (issue 34): the explain geometry and the
-results page's thumbnail at ingest (else on first use), other thumbnail sizes on first use; a failure is kept too and answered at once (a placeholder
-image, or a 422 naming the reason), never computed again per view. Pool calls are counted by wrapping
-the runtime's pool; the work itself runs in real pool processes."""
+results page's thumbnail at ingest (else on first use), other thumbnail sizes on first use; a failure is
+kept too and answered at once (a placeholder image, or a 422 naming the reason), never computed again
+per view. Pool calls are counted by wrapping the runtime's pool; the work itself runs in real pool
+processes."""
 
 from __future__ import annotations
 
