@@ -11,7 +11,7 @@ from app.core.cleaning import vertex_components
 from app.core.mesh import load_mesh
 from app.datasets.bodyplans import PLANS
 from app.datasets.folder import read_labelled_folder
-from benchmarks.highres import KIN, _rest_segments, fine_shape, generate, skin
+from benchmarks.highres import KIN, _rest_segments, fine_shape, generate, kin_chains, skin
 
 pytestmark = pytest.mark.slow  # marching cubes of 20 bodies: ~40 s on 2 cores
 
@@ -40,13 +40,18 @@ def test_kin_shapes_are_reproducible():
     np.testing.assert_array_equal(a.vertices, b.vertices)
 
 
-def test_kin_classes_share_a_body_and_differ_by_small_parts(kin):
-    def relative_area(mesh) -> float:
-        return float(mesh.face_areas().sum() / np.ptp(mesh.vertices, axis=0).max() ** 2)
-
-    quadrupeds = [relative_area(kin[k]) for k in ("cat", "dog", "wolf", "goat", "camel", "bull")]
-    people = [relative_area(kin[k]) for k in ("person_a", "person_b", "person_c")]
-    assert max(quadrupeds) / min(quadrupeds) < 1.6 and max(people) / min(people) < 1.6
+def test_kin_classes_share_a_plan_and_differ_by_build_and_small_parts():
+    base = PLANS["quadruped"]()
+    dog, anchors = kin_chains("dog")
+    assert [c.lengths for c in dog] == [c.lengths for c in base]  # the plan as it is
+    camel, _ = kin_chains("camel")
+    for leg in (1, 2, 3, 4):  # a camel's legs: 1.3 times as long, 0.9 times as thick
+        np.testing.assert_allclose(camel[leg].lengths, np.array(base[leg].lengths) * 1.3)
+        np.testing.assert_allclose(camel[leg].radii, np.array(base[leg].radii) * 0.9)
+    assert camel[5].lengths[1] == base[5].lengths[1]  # the head, which carries the parts, keeps its size
+    # parts are placed from the plan's own rest pose, whatever the class's proportions
+    np.testing.assert_allclose(anchors[0], base[0].anchor)
+    assert len(KIN["wolf"][1]) == 4  # two ears, a snout, a tuft
 
 
 @pytest.mark.parametrize(("kind", "classes"), [("characters", 5), ("kin-characters", len(KIN))])
