@@ -10,16 +10,9 @@ from app.core.hks import TIME_RANGES
 from app.core.laplacian import LAPLACIANS
 from app.core.smoothing import WEIGHTS
 from app.core.vocabulary import EncodeParams
-from app.services.evaluation import (
-    DEFAULT_CACHE,
-    DEFAULT_ROWS,
-    ROW_NAMES,
-    SUBDIVISIONS,
-    EvaluationError,
-    EvaluationOptions,
-    evaluate,
-)
-from app.services.evaluation_report import format_table, write_json
+from app.evaluation.harness import SUBDIVISIONS, evaluate
+from app.evaluation.report import format_table, write_json
+from app.evaluation.results import DEFAULT_CACHE, DEFAULT_ROWS, ROW_NAMES, EvaluationError, EvaluationOptions
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

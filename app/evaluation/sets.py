@@ -31,7 +31,7 @@ class Folder:
 
 def read_folder(directory: str | Path) -> Folder:
     from app.datasets.folder import DatasetError, read_labelled_folder
-    from app.services.evaluation_cache import content_sha256
+    from app.evaluation.cache import content_sha256
 
     try:
         entries = read_labelled_folder(directory)

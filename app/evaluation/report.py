@@ -4,62 +4,13 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
-
-import numpy as np
+from typing import Any
 
 from app.core.metrics import METRICS
+from app.evaluation.results import EvaluationResult
 from app.storage.blobs import atomic_write
-
-if TYPE_CHECKING:
-    from app.services.evaluation import EvaluationResult
-
-
-@dataclass
-class RowResult:
-    """One line of the table: mean scores, descriptor length d, seconds (fit + encode + rank + score),
-    and for a variant line the clean line it is compared with (Δ mAP = this - reference)."""
-
-    name: str
-    kind: str
-    scores: dict[str, float]
-    d: int
-    seconds: float
-    reference: RowResult | None = None
-    details: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def delta_map(self) -> float | None:
-        return None if self.reference is None else self.scores["mAP"] - self.reference.scores["mAP"]
-
-
-def mean_over_seeds(lines: Sequence[RowResult]) -> RowResult:
-    """One line from the same line under several seeds: mean scores, total seconds."""
-    first = lines[0]
-    if len(lines) == 1:
-        return first
-    scores = {m: float(np.mean([line.scores[m] for line in lines])) for m in first.scores}
-    maps = [line.scores["mAP"] for line in lines]
-    details = {**first.details, "seeds": len(lines), "mAP_per_seed": maps, "mAP_sd": float(np.std(maps)),
-               "per_class": merge_breakdowns([line.details["per_class"] for line in lines])}
-    return RowResult(first.name, first.kind, scores, first.d, sum(line.seconds for line in lines),
-                     first.reference, details)
-
-
-def merge_breakdowns(breakdowns: Sequence[dict[str, dict]]) -> dict[str, dict]:
-    """Per-class mAP averaged over seeds; intruder counts summed over them."""
-    merged = {}
-    for cls in breakdowns[0]:
-        counts: dict[str, int] = {}
-        for b in breakdowns:
-            for other, n in b[cls]["intruders"].items():
-                counts[other] = counts.get(other, 0) + n
-        merged[cls] = {"mAP": float(np.mean([b[cls]["mAP"] for b in breakdowns])),
-                       "intruders": dict(sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))}
-    return merged
 
 
 def format_table(result: EvaluationResult) -> str:

@@ -1,20 +1,20 @@
 """The evaluation harness: Table 2 (NN FT ST E DCG mAP d) of a labelled folder, every shape a query.
 
-One call describes every mesh once (worker processes, on-disk cache, see evaluation_cache), then
+One call describes every mesh once (worker processes, on-disk cache, see app.evaluation.cache), then
 for each row fits a vocabulary on the folder's keypoint descriptors, encodes every shape, ranks by
 L1 distance and scores with app.core.metrics. Baselines (Shape-DNA, D2) run in the same loop on the
 same shapes. Variant lines measure what a deployed service meets, each against its clean, fit-on-DIR
 line (Δ mAP): a frozen vocabulary (`vocabulary`), a vocabulary fit on half of the classes
 (`fit_on="half"`), noisy queries against a clean database (`noise`, the paper's Fig. 3), and the
 meshes of another folder as queries (`queries`, e.g. another triangulation of every shape, see
-evaluation_sets). `fusion` weights add, per BoF row, a row fused with Shape-DNA (app.core.fusion).
+app.evaluation.sets). `fusion` weights add, per BoF row, a row fused with Shape-DNA (app.core.fusion).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,53 +26,18 @@ from app.core.keypoints import KeypointFilter
 from app.core.pipeline import DescribeParams, ShapeDescription
 from app.core.resolution import SUBDIVISIONS as SUBDIVISIONS  # the --subdivision choices
 from app.core.vocabulary import EncodeParams, Vocabulary, l1_distance
-from app.services import evaluation_cache as cache_mod
-from app.services import evaluation_sets as sets
-from app.services.evaluation_report import RowResult, mean_over_seeds
-
-PRESETS: tuple[str, ...] = ("paper",)  # run5 at the raw resolution, unsmoothed: as the paper computes it
-BASELINES: tuple[str, ...] = ("shape-dna", "d2")
-ROW_NAMES: tuple[str, ...] = RUNS + PRESETS + BASELINES
-# the paper row solves at each mesh's own resolution (tens of seconds per 50k-vertex scan): asked for by
-# name or with "all", never by default
-DEFAULT_ROWS: tuple[str, ...] = RUNS + BASELINES
-DEFAULT_CACHE = Path(".cache/describe")
-
-
-class EvaluationError(ValueError):
-    """The evaluation cannot run as asked; the message says why."""
-
-
-@dataclass(frozen=True)
-class EvaluationOptions:
-    rows: tuple[str, ...] = DEFAULT_ROWS
-    vocabulary_size: int = 64
-    mode: str = EncodeParams.mode  # hard (eq. 6) | soft (eq. 5)
-    sigma_scale: float = EncodeParams.sigma_scale  # soft VQ width, in the vocabulary's σ
-    keypoints_only: bool = False  # BoF over the keypoints instead of every vertex
-    area_weighted: bool = EncodeParams.area_weighted  # BoF as an integral over the surface (eq. 7)
-    keypoint_filter: bool = KeypointFilter.enabled
-    target_vertices: int = DescribeParams.target_vertices
-    k: int = DescribeParams.k  # eigenpairs
-    time_range: str = DescribeParams.time_range  # weyl | spectrum (the paper's t_min)
-    smoothing: int = DescribeParams.smoothing  # Taubin steps (λ, μ, λ ...)
-    smoothing_weights: str = DescribeParams.smoothing_weights  # one of smoothing.WEIGHTS
-    smoothing_target: float = DescribeParams.smoothing_target  # > 0: adaptive, to this roughness
-    fill_holes: float = DescribeParams.fill_holes  # largest cap closed, fraction of the area
-    laplacian: str = DescribeParams.laplacian  # cotangent | intrinsic (intrinsic Delaunay)
-    remesh: bool = DescribeParams.remesh  # isotropic remeshing at the canonical resolution
-    subdivision: str = DescribeParams.subdivision  # midpoint | loop
-    vocabulary: Path | None = None  # frozen vocabulary directory: adds a "frozen" line per row
-    fit_on: str = "all"  # all | half: "half" adds a line with a vocabulary fit on half the classes
-    noise: float = 0.0  # > 0: adds a line with noisy queries against the clean database
-    queries: Path | None = None  # labelled folder: adds a line with its meshes as queries
-    fusion: tuple[float, ...] = ()  # Shape-DNA weights: adds a fused row per BoF row and weight
-    seed: int = 0
-    seeds: int = 1  # k-means seeds seed, seed+1, ...: BoF lines report the mean (and the spread)
-    per_class: bool = False  # print where each clean BoF row loses (per-class mAP, first-tier intruders)
-    workers: int = 2
-    cache_dir: Path = DEFAULT_CACHE
-    progress: bool = True
+from app.evaluation import cache as cache_mod
+from app.evaluation import sets
+from app.evaluation.results import (
+    BASELINES,
+    PRESETS,
+    ROW_NAMES,
+    EvaluationError,
+    EvaluationOptions,
+    EvaluationResult,
+    RowResult,
+    mean_over_seeds,
+)
 
 
 @dataclass(frozen=True)
@@ -84,17 +49,6 @@ class Row:
     fusion: float | None = None  # Shape-DNA weight of a fused BoF row
     area_weighted: bool | None = None  # the BoF's integral; None: the options'
     mode: str | None = None  # vector quantisation; None: the options'
-
-
-@dataclass
-class EvaluationResult:
-    directory: str
-    shapes: int
-    classes: int
-    options: EvaluationOptions
-    rows: list[RowResult] = field(default_factory=list)
-    describe: dict = field(default_factory=dict)
-    seconds: float = 0.0
 
 
 def build_rows(options: EvaluationOptions) -> list[Row]:
@@ -195,7 +149,7 @@ def evaluate(directory: str | Path, options: EvaluationOptions | None = None) ->
 
 @dataclass(frozen=True)
 class CrossSet:
-    """Another folder's descriptions as queries against the database (evaluation_sets)."""
+    """Another folder's descriptions as queries against the database (app.evaluation.sets)."""
 
     name: str
     descriptions: list[ShapeDescription]

@@ -14,9 +14,10 @@ from app.cli import CommandError
 from app.core.metrics import METRICS
 from app.core.pipeline import ShapeDescription
 from app.core.vocabulary import Vocabulary
-from app.services import evaluation_cache
-from app.services.evaluation import EvaluationError, EvaluationOptions, evaluate
-from app.services.evaluation_report import format_table, to_json
+from app.evaluation import cache as evaluation_cache
+from app.evaluation.harness import evaluate
+from app.evaluation.report import format_table, to_json
+from app.evaluation.results import EvaluationError, EvaluationOptions
 from tests.conftest import dataset_or_skip
 
 CLASSES = ("alien", "ants", "armadillo")
@@ -235,23 +236,6 @@ def test_command_prints_the_table_and_writes_json(
         bad.func(bad)
 
 
-def test_cache_keys_separate_parameters_variants_and_code(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    from app.core.keypoints import KeypointFilter
-    from app.core.pipeline import DescribeParams
-
-    cache = evaluation_cache.DescriptionCache(tmp_path)
-    clean, noisy = evaluation_cache.Variant(), evaluation_cache.Variant(0.01, 0)
-    p1, p2 = DescribeParams(), DescribeParams(keypoint_filter=KeypointFilter(enabled=True))
-    paths = {cache.description_path("ab", p, v) for p in (p1, p2) for v in (clean, noisy)}
-    assert len(paths) == 4
-    # an edit to the core code that computes descriptions must not reuse old entries
-    fingerprint = evaluation_cache.code_fingerprint(exclude=("pipeline",))
-    monkeypatch.setitem(evaluation_cache._FINGERPRINTS, "describe", fingerprint)
-    assert evaluation_cache.DescriptionCache(tmp_path).description_path("ab", p1, clean) not in paths
-
-
 def test_seeds_average_the_bof_lines_over_k_means_seeds(folder: Path, tmp_path: Path) -> None:
     cache = tmp_path / "cache"
     rows = ("run5",)
@@ -333,42 +317,6 @@ def test_queries_from_another_folder(folder: Path, tmp_path: Path) -> None:
     assert cross.name == "run5 [queries remesh]" and 0.0 <= cross.scores["mAP"] <= 1.0
 
 
-def test_cross_scores_on_a_hand_computed_ranking() -> None:
-    from app.services.evaluation_sets import cross_scores
-
-    labels = np.array(["a", "a", "b", "b"])
-    distances = np.array([[0.0, 3.0, 1.0, 2.0], [5.0, 4.0, 1.0, 0.0]])  # queries of classes a, b
-    query_labels = np.array(["a", "b"])
-    # unpaired: query 0 ranks 0(a) 2(b) 3(b) 1(a): AP = (1 + 2/4) / 2; query 1 ranks 3 2 1 0: AP = 1
-    scores, per_class = cross_scores(distances, query_labels, labels, np.array([-1, -1]))
-    assert scores["mAP"] == pytest.approx((0.75 + 1.0) / 2)
-    assert scores["NN"] == 1.0 and per_class["a"]["mAP"] == pytest.approx(0.75)
-    # paired with database shapes 0 and 3: those leave the rankings (0: 2 3 1 -> AP 1/3; 1: 2 1 0 -> AP 1)
-    scores, _ = cross_scores(distances, query_labels, labels, np.array([0, 3]))
-    assert scores["mAP"] == pytest.approx((1 / 3 + 1.0) / 2) and scores["NN"] == 0.5
-
-
-def test_cross_scores_count_first_tier_intruders_by_hand() -> None:
-    from app.services.evaluation_sets import cross_scores
-
-    labels = np.array(["a", "a", "a", "b", "b", "c"])
-    #                          a0   a1   a2   b0   b1   c0
-    distances = np.array([[0.5, 3.0, 4.0, 1.0, 2.0, 0.1],   # query a: c0 a0 b0 b1 a1 a2
-                          [2.0, 0.9, 5.0, 0.3, 0.2, 0.4],   # query a: b1 b0 c0 a1 a0 a2
-                          [1.0, 2.0, 3.0, 0.5, 4.0, 6.0]])  # query b: b0 a0 a1 a2 b1 c0
-    query_labels = np.array(["a", "a", "b"])
-    # unpaired: an a-query's first tier is its first 3 results, a b-query's its first 2
-    _, per_class = cross_scores(distances, query_labels, labels, np.array([-1, -1, -1]))
-    assert per_class["a"]["intruders"] == {"b": 3, "c": 2}  # c0 b0 | b1 b0 c0
-    assert list(per_class["a"]["intruders"]) == ["b", "c"]  # most frequent first
-    assert per_class["b"]["intruders"] == {"a": 1}  # b0 a0
-    # paired (a0, a1, b0 are the queries' counterparts): the tiers shrink to 2, 2 and 1
-    _, per_class = cross_scores(distances, query_labels, labels, np.array([0, 1, 3]))
-    assert per_class["a"]["intruders"] == {"b": 3, "c": 1}  # c0 b0 | b1 b0
-    assert per_class["b"]["intruders"] == {"a": 1}  # a0
-    assert set(per_class) == {"a", "b"}  # classes with queries only
-
-
 def test_fusion_rows(folder: Path, tmp_path: Path) -> None:
     result = evaluate(folder, _options(tmp_path / "cache", rows=("run5",), fusion=(0.0, 1.0), noise=0.01))
     names = [r.name for r in result.rows]
@@ -442,7 +390,7 @@ def test_paper_preset_is_the_papers_method(folder: Path, tmp_path: Path) -> None
 def test_the_paper_row_runs_only_when_asked(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """It solves at each mesh's own resolution (tens of seconds on a fine scan): not a default."""
     from app.commands import evaluate as command
-    from app.services.evaluation import DEFAULT_ROWS, ROW_NAMES
+    from app.evaluation.results import DEFAULT_ROWS, ROW_NAMES
 
     seen: list[EvaluationOptions] = []
 
