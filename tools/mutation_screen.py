@@ -1,6 +1,6 @@
 """Screen mutmut's mutants against a few fast test files, recording kills in mutants/*.meta.
 
-    .venv/bin/python tools/mutation_screen.py 'app.api.uploads.*' --tests tests/api/test_uploads_mutants.py
+    .venv/bin/python tools/mutation_screen.py 'app.api.uploads.*' --tests tests/api/test_uploads.py
 
 Why: mutmut runs *every* test that reached a mutant's function, so each survivor (equivalent or
 not) pays for the slowest of them (a 12 s TestClient run, a seeded data directory): on a shared,

@@ -1,5 +1,5 @@
 """Quadric edge collapse's face budget and vertex clustering's grid, cells, sides and rounds, on
-hand-made meshes (issue 15 mutation pass)."""
+hand-made meshes."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The reader's size budget at its edges (issue 15 mutation pass)."""
+"""The reader's size budget at its edges."""
 
 from __future__ import annotations
 

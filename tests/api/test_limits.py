@@ -1,6 +1,6 @@
-"""app/api/limits.py's middleware and checks driven directly, without a server (issue 15 mutation
-pass): GuardUploads' slots, drain and stall answers, RefuseEncodedBodies, send_error's framing,
-the text and file-name rules at their edges, and the data-directory probe."""
+"""app/api/limits.py's middleware and checks driven directly, without a server: GuardUploads' slots, drain
+and stall answers, RefuseEncodedBodies, send_error's framing, the text and file-name rules at their
+edges, and the data-directory probe."""
 
 from __future__ import annotations
 

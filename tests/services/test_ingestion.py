@@ -1,5 +1,5 @@
-"""ingestion.submit and ingestion.run_ingest called in-process (issue 15: the mutation pass could not see
-them, their other tests run workers in subprocesses). What an upload stores (the model row, its mesh
+"""ingestion.submit and ingestion.run_ingest called in-process (their other tests run
+workers in subprocesses). What an upload stores (the model row, its mesh
 file, one queued job), what identical content does (the same model; a failed one queued again), the
 refusals (format, empty, metadata, a full queue) and what they leave behind; what an ingest job stores
 (description, vector under the active vocabulary, ready with its vertex count, job done with timings),

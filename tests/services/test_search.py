@@ -1,6 +1,6 @@
-"""search.similar and the label filter, pinned where a mutation pass found them untested (issue 15):
-the stored model is left out of its own answer, an unknown or unindexed model is refused in words,
-a vocabulary swap is retried three times at most, and a label narrows the candidates to its models."""
+"""search.similar and the label filter: the stored model is left out of its own answer, an unknown or
+unindexed model is refused in words, a vocabulary swap is retried three times at most, and a label
+narrows the candidates to its models."""
 
 from __future__ import annotations
 
