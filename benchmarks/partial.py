@@ -26,6 +26,7 @@ import numpy as np
 
 from app.core.cleaning import vertex_components
 from app.core.mesh import Mesh, clean, load_mesh
+from app.core.meshdata import InvalidMeshError
 from app.datasets import locate
 from app.datasets.folder import read_labelled_folder
 from app.storage.blobs import atomic_write
@@ -53,7 +54,10 @@ def largest_piece(mesh: Mesh, keep: np.ndarray) -> Mesh:
         return sub
     labels = vertex_components(sub)[sub.faces[:, 0]]  # (f',) component of each kept face
     best = np.bincount(labels, weights=face_areas(sub)).argmax()
-    return clean(Mesh(sub.vertices, sub.faces[labels == best]), 0.0)
+    try:
+        return clean(Mesh(sub.vertices, sub.faces[labels == best]), 0.0)
+    except InvalidMeshError:  # a few faces left: an empty piece, outside any band
+        return Mesh(sub.vertices, sub.faces[:0])
 
 
 def _plane_keep(centroids: np.ndarray, areas: np.ndarray, alive: np.ndarray, target: float,

@@ -12,7 +12,7 @@ import trimesh
 from app.core.cleaning import vertex_components
 from app.core.holes import boundary_loops
 from app.core.mesh import Mesh, load_mesh
-from benchmarks.partial import cut, face_areas, generate, parse_band, punch
+from benchmarks.partial import cut, face_areas, generate, largest_piece, parse_band, punch
 
 BANDS = [(0.60, 0.85), (0.40, 0.60)]
 
@@ -108,3 +108,10 @@ def test_parse_band() -> None:
     assert parse_band("60-85") == (0.60, 0.85)
     with pytest.raises(ValueError):
         parse_band("85-60")
+
+
+def test_a_sliver_is_an_empty_piece_not_an_error() -> None:
+    mesh = _sphere()
+    keep = np.zeros(len(mesh.faces), dtype=bool)
+    keep[0] = True
+    assert len(largest_piece(mesh, keep).faces) == 0
