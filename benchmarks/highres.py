@@ -28,11 +28,10 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from app.core.mesh import Mesh, clean
 from app.datasets.bodyplans import PLANS, Chain
-from app.datasets.synthetic import Frame, Segment, pose_frames, surface
+from app.datasets.synthetic import Frame, Segment, capsule_distance, pose_frames, random_motion, surface
 from benchmarks.scans import _decimate, _with_holes
 from benchmarks.variants import write_labelled
 
@@ -154,7 +153,7 @@ def fine_shape(name: str, rng: np.random.Generator, holes: tuple[int, int] = (0,
     starts = list(np.cumsum([0] + [len(c.lengths) for c in chains])[:-1])
     segments = segments + posed_parts(parts, segments, frames, starts, anchors, rng)
     v, f = surface(segments, grid=grid, max_vertices=None)
-    mesh = _random_motion(Mesh(v, f), rng)
+    mesh = Mesh(random_motion(v, rng), f)
     if holes[1] > 0:
         mesh = _with_holes(mesh, rng, holes)
     return _decimate(mesh, _log_uniform(rng, vertex_range))
@@ -164,14 +163,6 @@ def _log_uniform(rng: np.random.Generator, lo_hi: tuple[int, int]) -> int:
     return int(np.exp(rng.uniform(*np.log(lo_hi))))
 
 
-def _random_motion(mesh: Mesh, rng: np.random.Generator) -> Mesh:
-    rotation = Rotation.random(random_state=rng).as_matrix()
-    scale = rng.uniform(0.5, 2.0)
-    shift = rng.uniform(-1.0, 1.0, size=3)
-    v = mesh.vertices
-    return Mesh((v - v.mean(axis=0)) @ rotation.T * scale + shift, mesh.faces)
-
-
 def skin(template: np.ndarray, rest: list[Segment], frames: list[Frame], posed: list[Segment],
          softness: float = SKIN_SOFTNESS) -> np.ndarray:
     """Linear blend skinning: template (n, 3) in the rest pose -> (n, 3) posed.
@@ -179,7 +170,7 @@ def skin(template: np.ndarray, rest: list[Segment], frames: list[Frame], posed: 
     Each vertex blends the rigid motions of the segments whose capsules it lies nearest, with weights
     softmax(-d / softness) over its distance d to each capsule's surface.
     """
-    dists = np.stack([_capsule_surface_distance(template, a, b, r0, r1) for a, b, r0, r1 in rest], axis=1)
+    dists = np.stack([capsule_distance(template, a, b, r0, r1) for a, b, r0, r1 in rest], axis=1)
     logits = -(dists - dists.min(axis=1, keepdims=True)) / softness  # (n, s)
     weights = np.exp(logits)
     weights /= weights.sum(axis=1, keepdims=True)
@@ -187,14 +178,6 @@ def skin(template: np.ndarray, rest: list[Segment], frames: list[Frame], posed: 
     for s, ((rest_start, rot), seg) in enumerate(zip(frames, posed, strict=True)):
         out += weights[:, s:s + 1] * (np.asarray(seg[0]) + (template - rest_start) @ rot.T)
     return out
-
-
-def _capsule_surface_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, r0: float,
-                              r1: float) -> np.ndarray:
-    """(n,) distance of points p (n, 3) to the tapered capsule's surface (negative inside)."""
-    ab = b - a
-    t = np.clip((p - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0)
-    return np.linalg.norm(p - (a + t[:, None] * ab), axis=1) - (r0 + (r1 - r0) * t)
 
 
 def character_template(
@@ -252,7 +235,7 @@ def generate(out: Path | str, kind: str = "fine", per_class: int = 10, seed: int
         segments, frames = pose_frames(kin_chains(name)[0], rng, jitter=False)
         moved = [segments[k] for k in carriers]  # a part moves with the segment that carries it
         posed = Mesh(skin(template.vertices, rest, [frames[k] for k in carriers], moved), template.faces)
-        return _random_motion(posed, rng)
+        return Mesh(random_motion(posed.vertices, rng), posed.faces)
 
     return write_labelled(Path(out), names, per_class, pose_character)
 

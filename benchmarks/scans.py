@@ -26,12 +26,11 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-from scipy.spatial.transform import Rotation
 
 from app.core.cleaning import vertex_components
 from app.core.mesh import Mesh, clean
 from app.datasets.bodyplans import PLANS
-from app.datasets.synthetic import _simplify, pose, surface
+from app.datasets.synthetic import _simplify, pose, random_motion, surface
 from benchmarks.variants import write_labelled
 
 FINE_GRID = 200  # voxels along the longest side: ~13k-46k vertices from marching cubes
@@ -46,11 +45,7 @@ def scan_shape(plan: str, rng: np.random.Generator, grid: int = FINE_GRID, holes
     """One scan-like instance: fine surface, holes, normal noise, random resolution, rigid motion."""
     segments = pose(PLANS[plan](), rng)
     v, f = surface(segments, grid=grid, max_vertices=None)
-    rotation = Rotation.random(random_state=rng).as_matrix()
-    scale = rng.uniform(0.5, 2.0)
-    shift = rng.uniform(-1.0, 1.0, size=3)
-    v = (v - v.mean(axis=0)) @ rotation.T * scale + shift
-    mesh = _with_holes(Mesh(v, f), rng, holes)
+    mesh = _with_holes(Mesh(random_motion(v, rng), f), rng, holes)
     diag = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
     normals = np.asarray(trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).vertex_normals)
     mesh = Mesh(mesh.vertices + normals * rng.normal(size=(mesh.n_vertices, 1)) * noise * diag, mesh.faces)

@@ -48,7 +48,7 @@ def cluster(mesh: Mesh, target_vertices: int, rounds: int = 6, split_sides: bool
     v = mesh.vertices
     lo = v.min(axis=0)
     fn = face_normals(mesh)  # (f, 3), |fn| = 2 area
-    normals = _vertex_normals(mesh, fn) if split_sides else None
+    normals = vertex_normal_sums(mesh, fn) if split_sides else None
     area = 0.5 * float(np.sqrt(np.einsum("ij,ij->i", fn, fn)).sum())
     del fn
     h = float(np.sqrt(area / max(target_vertices, 1)))
@@ -78,7 +78,7 @@ def face_normals(mesh: Mesh, chunk: int = 1 << 18) -> np.ndarray:
     return out
 
 
-def _vertex_normals(mesh: Mesh, fn: np.ndarray) -> np.ndarray:
+def vertex_normal_sums(mesh: Mesh, fn: np.ndarray) -> np.ndarray:
     """(n, 3) area-weighted vertex normals (not normalised) from face normals fn (f, 3)."""
     corners = mesh.faces.ravel()
     return np.stack(

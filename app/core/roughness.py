@@ -18,17 +18,14 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from app.core.decimation import face_normals, vertex_normal_sums
 from app.core.mesh import Mesh
 from app.core.smoothing import LAMBDA, MU, averaging_operator
 
 
 def vertex_normals(mesh: Mesh) -> np.ndarray:
     """(n, 3) unit area-weighted vertex normals (zero for a vertex without faces)."""
-    v, f = mesh.vertices, mesh.faces
-    cross = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # (f, 3), |.| = 2 area
-    normals = np.zeros_like(v)
-    for corner in range(3):
-        np.add.at(normals, f[:, corner], cross)
+    normals = vertex_normal_sums(mesh, face_normals(mesh))
     norm = np.linalg.norm(normals, axis=1, keepdims=True)
     return np.divide(normals, norm, out=np.zeros_like(normals), where=norm > 0)
 

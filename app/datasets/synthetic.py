@@ -57,10 +57,15 @@ def make_shape(plan: str, rng: np.random.Generator) -> tuple[np.ndarray, np.ndar
     """One random instance of a body plan -> vertices (n, 3) float64, faces (f, 3) int64."""
     segments = pose(PLANS[plan](), rng)
     vertices, faces = surface(segments)
+    return random_motion(vertices, rng), faces
+
+
+def random_motion(vertices: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(n, 3) -> (n, 3): centred, then a random rotation, a scale in [0.5, 2] and a shift in [-1, 1]^3."""
     rotation = Rotation.random(random_state=rng).as_matrix()
     scale = rng.uniform(0.5, 2.0)
     shift = rng.uniform(-1.0, 1.0, size=3)
-    return (vertices - vertices.mean(axis=0)) @ rotation.T * scale + shift, faces
+    return (vertices - vertices.mean(axis=0)) @ rotation.T * scale + shift
 
 
 def pose(chains: list[Chain], rng: np.random.Generator) -> list[Segment]:
@@ -125,7 +130,7 @@ def surface(segments: list[Segment], grid: int = GRID, blend: float = BLEND,
         box_hi = np.minimum(np.ceil((np.maximum(a, b) + max(r0, r1) + reach - lo) / h).astype(int) + 1, shape)
         axes = [lo[k] + h * np.arange(box_lo[k], box_hi[k]) for k in range(3)]
         pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-        d = _capsule_distance(pts, a, b, r0, r1)
+        d = capsule_distance(pts, a, b, r0, r1)
         block = tuple(slice(box_lo[k], box_hi[k]) for k in range(3))
         total[block] += np.exp(-d / blend).reshape(total[block].shape)
     with np.errstate(divide="ignore"):
@@ -150,7 +155,7 @@ def _simplify(verts: np.ndarray, faces: np.ndarray, target: int) -> tuple[np.nda
     return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64)
 
 
-def _capsule_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, r0: float, r1: float) -> np.ndarray:
+def capsule_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, r0: float, r1: float) -> np.ndarray:
     """(N,) distance from points p (N, 3) to the capsule a-b with radius r0 -> r1 along it."""
     ab = b - a
     ap = p - a

@@ -76,7 +76,7 @@ def test_vertex_normals_sum_the_normals_of_the_faces_around_each_vertex():
     expected = np.zeros((mesh.n_vertices, 3))
     for face, normal in zip(mesh.faces, fn, strict=True):
         expected[face] += normal
-    np.testing.assert_allclose(decimation._vertex_normals(mesh, fn), expected, atol=1e-14)
+    np.testing.assert_allclose(decimation.vertex_normal_sums(mesh, fn), expected, atol=1e-14)
 
 
 # --- cells and clusters --------------------------------------------------------------------------
@@ -203,7 +203,7 @@ def test_cluster_splits_sides_by_default_and_not_when_asked(monkeypatch):
     decimation.cluster(mesh, 100)
     lo, normals = seen[-1]
     np.testing.assert_allclose(lo, mesh.vertices.min(axis=0))  # the grid starts at the box corner
-    np.testing.assert_allclose(normals, decimation._vertex_normals(mesh, decimation.face_normals(mesh)))
+    np.testing.assert_allclose(normals, decimation.vertex_normal_sums(mesh, decimation.face_normals(mesh)))
     decimation.cluster(mesh, 100, split_sides=False)
     assert seen[-1][1] is None
 
