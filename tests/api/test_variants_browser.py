@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import trimesh
 
-from tests.api.test_web_browser import CHROMIUM, launch, served  # noqa: F401 (fixture)
+from tests.api.test_web_browser import CHROMIUM, launch, served, wait_until  # noqa: F401 (fixture)
 from tests.conftest import wait_for
 
 pytestmark = [
@@ -37,9 +37,10 @@ def test_variants_view_shows_the_relation_and_records_a_decision(served: str, co
         card = page.locator("#similar-results .results.variants .card").first
         assert "rescaled" in card.text_content() and "× 25.40" in card.text_content()
         card.locator("button", has_text="keep both").click()
-        page.wait_for_function(
-            "document.querySelector('#similar-results .results.variants .decision').textContent"
-            " === 'keep both'"
+        wait_until(  # not page.wait_for_function: the page's CSP refuses its in-page eval
+            page,
+            "document.querySelector('#similar-results .results.variants .decision')?.textContent"
+            " === 'keep both'",
         )
         card.click()  # both shapes side by side, in the compare panel under the results
         page.wait_for_selector("#similar-results .compare:not([hidden])", timeout=60_000)
