@@ -77,7 +77,10 @@ def run_niced(nice: int, fn: Callable[..., Any], *args: Any) -> Any:
 
     def niced() -> None:
         with contextlib.suppress(OSError):  # not permitted here: run at the usual priority
-            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
+            # relative to the priority this thread started with (the caller's), so a service that was
+            # itself started under `nice` still runs its background work below its searches
+            tid = threading.get_native_id()
+            os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + nice))
         try:
             outcome["value"] = fn(*args)
         except BaseException as exc:  # re-raised in the caller's thread (MemoryError included)

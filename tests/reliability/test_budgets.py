@@ -146,6 +146,31 @@ def test_the_deadline_counts_the_wait_and_frees_the_queue_place(pool, tmp_path):
     asyncio.run(scenario())
 
 
+def test_a_niced_call_adds_to_the_priority_its_caller_runs_at():
+    """run_niced raises the niceness by `nice`, not to it: a server started under `nice 5` still runs its
+    background work 3 steps below its searches, and the caller's thread keeps its own priority."""
+    import threading
+
+    from app.worker.lifeline import run_niced
+
+    seen: dict[str, int] = {}
+
+    def caller() -> None:  # a thread of its own, so the test process keeps its priority
+        tid = threading.get_native_id()
+        base = os.getpriority(os.PRIO_PROCESS, tid)
+        os.setpriority(os.PRIO_PROCESS, tid, min(19, base + 5))
+        seen["caller"] = os.getpriority(os.PRIO_PROCESS, tid)
+        seen["niced"] = run_niced(3, niceness)
+        seen["plain"] = run_niced(0, niceness)
+        seen["after"] = os.getpriority(os.PRIO_PROCESS, tid)
+
+    thread = threading.Thread(target=caller)
+    thread.start()
+    thread.join()
+    assert seen["niced"] == min(19, seen["caller"] + 3)
+    assert seen["plain"] == seen["caller"] == seen["after"]
+
+
 def test_background_kinds_run_niced_and_leave_the_process_at_its_priority(pool):
     async def scenario():
         base = os.getpriority(os.PRIO_PROCESS, 0)
