@@ -31,6 +31,7 @@ class DescribeSettings(BaseModel):
     m: int = Field(default=DescribeParams.m, ge=4)
     target_vertices: int = Field(default=DescribeParams.target_vertices, ge=0)
     smoothing: int = Field(default=DescribeParams.smoothing, ge=0)
+    antialias: float = Field(default=DescribeParams.antialias, ge=0.0)  # canonical edge lengths; 0: none
     smoothing_weights: str = DescribeParams.smoothing_weights  # one of app.core.smoothing.WEIGHTS
     time_range: Literal["spectrum", "weyl"] = DescribeParams.time_range  # type: ignore[assignment]
     laplacian: Literal["cotangent", "intrinsic"] = DescribeParams.laplacian  # type: ignore[assignment]

@@ -284,9 +284,11 @@ def main(argv: list[str] | None = None) -> int:
                     help="Taubin weights, one of app.core.smoothing.WEIGHTS (default: the shipped ones)")
     ap.add_argument("--smoothing-target", type=float, default=None,
                     help="adaptive smoothing's roughness target (default: the shipped one; 0: fixed steps)")
+    ap.add_argument("--antialias", type=float, default=None,
+                    help="low-pass before decimation, in canonical edge lengths (default: the shipped one)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    keys = ("target_vertices", "k", "smoothing", "smoothing_weights", "smoothing_target")
+    keys = ("target_vertices", "k", "smoothing", "smoothing_weights", "smoothing_target", "antialias")
     overrides = {key: value for key in keys
                  if (value := getattr(args, key)) is not None}
     if args.child:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from app.config import DescribeSettings, Settings
+from app.config import BudgetSettings, DescribeSettings, Settings
 from app.datasets import locate
 
 SHREC = locate.dataset_dir("shrec11-simplified")  # SHAPEBAG_DATASETS (app/datasets/locate.py)
@@ -86,6 +86,12 @@ def make_settings(data_dir: Path, **overrides) -> Settings:
         lease_seconds=20.0,
         warm_up=False,
         describe_timeout_s=60.0,
+        # a loaded machine starts pool processes slowly, and a budget's deadline counts that wait: an
+        # upload check in a 2-core CI run under other load took over the 30 s default (504). The
+        # deadlines themselves are tested with their own short budgets
+        check_budget=BudgetSettings(timeout_s=120.0),
+        explain_budget=BudgetSettings(queue=4, timeout_s=120.0),
+        render_budget=BudgetSettings(timeout_s=120.0),
     )
     base.update(overrides)
     return Settings(**base)

@@ -62,6 +62,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    metavar="R", help="adaptive smoothing: a mesh that was not subdivided gets Taubin pairs "
                    "until its roughness is at most R, --smoothing steps at most (0: --smoothing steps for "
                    "every mesh)")
+    p.add_argument("--antialias", type=float, default=EvaluationOptions.antialias, metavar="L",
+                   help="before decimation, a low-pass at the input's resolution over L canonical edge "
+                   "lengths (0: none; default %(default)s)")
     p.add_argument("--smoothing-weights", choices=WEIGHTS, default=EvaluationOptions.smoothing_weights,
                    help="Taubin weights: intrinsic (intrinsic Delaunay cotangent), cotangent (extrinsic, "
                    "clipped at 0), area (faces on each edge), capped-area (the same, each face at most the "
@@ -132,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
         time_range=args.time_range,
         smoothing=args.smoothing,
         smoothing_weights=args.smoothing_weights, smoothing_target=args.smoothing_target,
+        antialias=args.antialias,
 
         fill_holes=args.fill_holes,
         laplacian=args.laplacian,

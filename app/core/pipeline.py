@@ -57,6 +57,11 @@ class DescribeParams:
     # unlike the clean collection they are matched against (docs/results.md, "Full-resolution
     # columns"). 0: `smoothing` steps for every mesh
     smoothing_target: float = 0.0
+    # before decimation, a low-pass at the input's resolution over this many canonical edge lengths
+    # (app.core.antialias), so detail the canonical mesh cannot show, and vertex noise, do not alias
+    # into it: with it, full-resolution columns gain clean and under noise at once (docs/results.md,
+    # "Full-resolution columns"); 0: none. Meshes that are subdivided (SHREC'11) never see it
+    antialias: float = 0.5
     # intrinsic (cotangent weights of the intrinsic Delaunay triangulation: the same operator on a
     # Delaunay mesh, far less dependent on the triangulation elsewhere) | cotangent (the paper's)
     laplacian: str = "intrinsic"
@@ -81,6 +86,8 @@ class DescribeParams:
                              f"not {self.smoothing_weights!r}")
         if self.laplacian not in LAPLACIANS:
             raise ValueError(f"laplacian must be one of {', '.join(LAPLACIANS)}, not {self.laplacian!r}")
+        if not self.antialias >= 0.0:
+            raise ValueError(f"antialias must be >= 0, not {self.antialias!r}")
         if not self.smoothing_target >= 0.0:
             raise ValueError(f"smoothing_target must be >= 0, not {self.smoothing_target!r}")
         if not 0.0 <= self.fill_holes < 1.0:
@@ -93,8 +100,9 @@ class DescribeParams:
         """A stable string naming these parameters (cache keys)."""
         d = asdict(self)
         f = d.pop("keypoint_filter")
-        if not d["smoothing_target"]:  # fixed smoothing names its descriptions as before the option
-            del d["smoothing_target"]
+        for option in ("smoothing_target", "antialias"):  # off: descriptions named as before the option
+            if not d[option]:
+                del d[option]
         parts = [f"{k}={v}" for k, v in sorted(d.items()) if k != "solver"]
         parts += [f"kf.{k}={v}" for k, v in sorted(f.items())]
         return ";".join(parts)
@@ -158,7 +166,8 @@ class ShapeDescription:
 def canonical_mesh(mesh: Mesh, params: DescribeParams) -> Mesh:
     """The mesh whose vertices the description is of (before smoothing moves them): the canonical
     resolution, small holes closed. vertices (n, 3), faces (f, 3)."""
-    fine = to_resolution(mesh, params.target_vertices, subdivision=params.subdivision)
+    fine = to_resolution(mesh, params.target_vertices, subdivision=params.subdivision,
+                         prefilter_length=params.antialias)
     return fill_holes(fine, params.fill_holes)[0]
 
 

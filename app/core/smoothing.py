@@ -61,7 +61,7 @@ def averaging_operator(mesh: Mesh, weights: str) -> tuple[sp.csr_matrix, np.ndar
         stiffness, _ = laplace(mesh.vertices, mesh.faces)
         w = (-stiffness).tocsr()
     elif weights in ("area", "capped-area"):
-        w = _area_weights(mesh, capped=weights == "capped-area")
+        w = edge_area_weights(mesh, capped=weights == "capped-area")
     else:
         raise ValueError(f"weights must be one of {', '.join(AVERAGED)}, not {weights!r}")
     w.setdiag(0)
@@ -72,7 +72,7 @@ def averaging_operator(mesh: Mesh, weights: str) -> tuple[sp.csr_matrix, np.ndar
     return (sp.diags(np.where(has, 1.0 / np.where(has, rows, 1.0), 0.0)) @ w).tocsr(), has
 
 
-def _area_weights(mesh: Mesh, capped: bool = False) -> sp.csr_matrix:
+def edge_area_weights(mesh: Mesh, capped: bool = False) -> sp.csr_matrix:
     """(n, n) weights on the mesh's edges: W_ij = the summed area of the one or two faces on edge ij,
     each face's area capped at the mesh's median face area when `capped`: a face smaller than usual
     counts for less, one larger than usual for no more than a usual one."""

@@ -57,17 +57,19 @@ class Variant:
 # other app/core module, sub-packages included, keys the cache: editing any of them (the method is
 # being tuned, a module is split in two) must invalidate it, or an evaluation would silently report
 # stale descriptions
-_NOT_DESCRIBE = ("vocabulary", "fusion", "descriptor", "metrics", "baselines")
+_NOT_DESCRIBE = ("vocabulary", "fusion", "descriptor", "metrics", "baselines", "variants")
 _NOT_D2 = ("vocabulary", "fusion", "descriptor", "metrics", "laplacian", "spectrum", "hks", "keypoints",
            "pipeline", "smoothing")
 
 
 def code_fingerprint(exclude: Sequence[str] = ()) -> str:
-    """sha256 (16 hex) of the source of every app/core/**/*.py but the top-level modules `exclude`."""
+    """sha256 (16 hex) of the source of every app/core/**/*.py but the top-level modules and
+    sub-packages `exclude`."""
     core = Path(__file__).resolve().parents[1] / "core"
     h = hashlib.sha256()
     for path in sorted(core.rglob("*.py")):
-        if path.parent == core and path.stem in exclude:
+        top = path.relative_to(core).parts[0].removesuffix(".py")
+        if top in exclude:  # a top-level module, or a whole sub-package (variants relates, never describes)
             continue
         h.update(path.relative_to(core).as_posix().encode() + b"\0" + path.read_bytes())
     return h.hexdigest()[:16]

@@ -62,6 +62,7 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
         base = DescribeParams(
             k=options.k, target_vertices=options.target_vertices, time_range=options.time_range,
             smoothing=options.smoothing, smoothing_target=options.smoothing_target,
+            antialias=options.antialias,
             smoothing_weights=options.smoothing_weights, laplacian=options.laplacian, remesh=options.remesh,
             subdivision=options.subdivision, fill_holes=options.fill_holes, keypoint_filter=flt,
         )

@@ -46,6 +46,7 @@ class EvaluationOptions:
     smoothing: int = DescribeParams.smoothing  # Taubin steps (λ, μ, λ ...)
     smoothing_weights: str = DescribeParams.smoothing_weights  # one of smoothing.WEIGHTS
     smoothing_target: float = DescribeParams.smoothing_target  # > 0: adaptive, to this roughness
+    antialias: float = DescribeParams.antialias  # > 0: low-pass before decimation, canonical edges
     fill_holes: float = DescribeParams.fill_holes  # largest cap closed, fraction of the area
     laplacian: str = DescribeParams.laplacian  # cotangent | intrinsic (intrinsic Delaunay)
     remesh: bool = DescribeParams.remesh  # isotropic remeshing at the canonical resolution
