@@ -35,7 +35,7 @@ class LocalParams:
     slopes: int = 16
     shifts: int = 6  # scale hypotheses 0..shifts-1: kept share down to ratio^-(shifts-1) (~0.42)
     points: int = 256
-    rim_factor: float = 2.0
+    rim_factor: float = 1.0  # 2 and 3 retrieved worse on SHREC pieces (docs/partial.md)
 
     def times(self, extra: int = 0) -> np.ndarray:
         """(slopes + 1 + extra,) the times, ascending."""
