@@ -150,6 +150,16 @@ class SearchHit(BaseModel):
     label: str | None
     distance: float = Field(description="L1 distance between BoF vectors (+ scaled Shape-DNA when fused)")
     rank: int
+    forward: float | None = Field(
+        None, ge=0.0, le=1.0, description="share of the query's surface found in the model (partial matching;"
+        " null when the model was described before local signatures were stored)"
+    )
+    reverse: float | None = Field(
+        None, ge=0.0, le=1.0, description="share of the model's surface the query covers (partial matching)"
+    )
+    partial: bool = Field(
+        False, description="true when the query was taken for a piece and the hits re-ranked by partial match"
+    )
     relation: str | None = Field(
         None, description="the verified variant relation to the query model, when there is one (GET"
         " /models/{id}/similar): identical | moved | rescaled | mirrored | retriangulated | part_of"

@@ -10,6 +10,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -19,13 +20,15 @@ from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import LAPLACIANS, laplacian
 from app.core.mesh import InvalidMeshError, Mesh
 from app.core.packing import pack_float32, unpack_float32
+from app.core.partial import LocalParams, LocalSignature, free_boundary, local_signature
 from app.core.remeshing import isotropic_remesh
 from app.core.resolution import SUBDIVISIONS, normalize_scale, to_resolution
 from app.core.roughness import smooth_until
 from app.core.smoothing import WEIGHTS, taubin
 from app.core.spectrum import SpectrumError, smallest_eigenpairs
 
-DESCRIPTION_FORMAT = 2  # 2: the HKS table packed (app/core/packing.py); 1 still loads
+DESCRIPTION_FORMAT = 3  # 3: + the local signature (app/core/partial.py); 2 (HKS packed), 1 still load
+LOCAL = LocalParams()  # fixed: a model's and a query's local signatures must share one grid
 
 
 @dataclass(frozen=True)
@@ -123,6 +126,8 @@ class ShapeDescription:
     eigenvalues : (k,) float64, of the unit-area mesh (Shape-DNA comes for free)
     input_vertices : vertex count of the mesh as given
     seconds     : per-stage wall time
+    local       : sampled local signature for partial matching (app.core.partial, on the query grid:
+                  a model uses its leading slopes); None in descriptions saved before format 3
     """
 
     hks: np.ndarray
@@ -131,6 +136,7 @@ class ShapeDescription:
     eigenvalues: np.ndarray
     input_vertices: int
     seconds: dict[str, float] = field(default_factory=dict)
+    local: LocalSignature | None = None
 
     @property
     def n_vertices(self) -> int:
@@ -138,20 +144,25 @@ class ShapeDescription:
 
     def save(self, path: str | Path) -> None:
         """Write a .npz (no pickle); the HKS table packed losslessly (app/core/packing.py)."""
+        local: dict[str, Any] = {}
+        if self.local is not None:
+            local = {"local_slopes": self.local.slopes, "local_area": self.local.area,
+                     "local_valid": self.local.valid, "local_rim": np.asarray(self.local.rim)}
         with open(path, "wb") as fh:
             np.savez_compressed(
                 fh, hks_packed=pack_float32(self.hks), hks_shape=np.asarray(self.hks.shape, dtype=np.int64),
                 weights=self.weights, keypoints=self.keypoints,
                 eigenvalues=self.eigenvalues, input_vertices=np.int64(self.input_vertices),
-                format=np.int64(DESCRIPTION_FORMAT),
+                format=np.int64(DESCRIPTION_FORMAT), **local,
             )
 
     @classmethod
     def load(cls, path: str | Path) -> ShapeDescription:
-        """Read what save() writes, or a format-1 file (its HKS table stored as it is)."""
+        """Read what save() writes, or a format-1 file (its HKS table stored as it is) or a format-2
+        one (no local signature)."""
         with np.load(path, allow_pickle=False) as z:
             found = int(z["format"])
-            if found not in (1, DESCRIPTION_FORMAT):
+            if found not in (1, 2, DESCRIPTION_FORMAT):
                 raise ValueError(f"description format {found} is not {DESCRIPTION_FORMAT}")
             if found == 1:
                 hks = z["hks"]
@@ -159,16 +170,42 @@ class ShapeDescription:
                 hks = unpack_float32(z["hks_packed"], tuple(int(x) for x in z["hks_shape"]))
             return cls(
                 hks=hks, weights=z["weights"], keypoints=z["keypoints"].astype(bool),
-                eigenvalues=z["eigenvalues"], input_vertices=int(z["input_vertices"]),
+                eigenvalues=z["eigenvalues"], input_vertices=int(z["input_vertices"]), local=_local(z),
             )
+
+
+def load_local(path: str | Path) -> LocalSignature | None:
+    """The local signature of a saved description (None before format 3), without the HKS table."""
+    with np.load(path, allow_pickle=False) as z:
+        return _local(z)
+
+
+def _local(z: np.lib.npyio.NpzFile) -> LocalSignature | None:
+    if "local_slopes" not in z.files:
+        return None
+    return LocalSignature(slopes=z["local_slopes"], area=z["local_area"], valid=z["local_valid"],
+                          rim=float(z["local_rim"]))
 
 
 def canonical_mesh(mesh: Mesh, params: DescribeParams) -> Mesh:
     """The mesh whose vertices the description is of (before smoothing moves them): the canonical
     resolution, small holes closed. vertices (n, 3), faces (f, 3)."""
+    return canonical_with_rim(mesh, params)[0]
+
+
+def canonical_with_rim(mesh: Mesh, params: DescribeParams) -> tuple[Mesh, np.ndarray]:
+    """(canonical_mesh(mesh, params), rim (n,) bool): the vertices on a free boundary of the canonical
+    resolution, closed or not, and the centres of the caps that closed one (heat reflected there
+    before the cap, and a cap is not the surface that was there)."""
     fine = to_resolution(mesh, params.target_vertices, subdivision=params.subdivision,
                          prefilter_length=params.antialias)
-    return fill_holes(fine, params.fill_holes)[0]
+    closed = fill_holes(fine, params.fill_holes)[0]
+    return closed, _rim_mask(fine.faces, len(fine.vertices), len(closed.vertices))
+
+
+def _rim_mask(faces: np.ndarray, n_open: int, n_closed: int) -> np.ndarray:
+    """(n_closed,) the free-boundary vertices of the open mesh (n_open vertices), then its caps' centres."""
+    return np.concatenate([free_boundary(faces, n_open), np.ones(n_closed - n_open, dtype=bool)])
 
 
 def describe(mesh: Mesh, params: DescribeParams | None = None) -> ShapeDescription:
@@ -183,16 +220,21 @@ def describe_filters(
     """One eigen-solve, one description per keypoint filter (the harness compares filters; the
     solve is the cost). Description i equals describe(mesh, replace(params, keypoint_filter=filters[i]))."""
     clock = _Clock()
-    return _from_canonical(canonical_mesh(mesh, params), mesh.n_vertices, params, filters, clock)
+    fine, rim = canonical_with_rim(mesh, params)
+    return _from_canonical(fine, rim, mesh.n_vertices, params, filters, clock)
 
 
-def describe_canonical(fine: Mesh, input_vertices: int, params: DescribeParams) -> ShapeDescription:
-    """describe(mesh, params) from canonical_mesh(mesh, params), for a caller that needs both (the
-    explain view): the mesh is resampled once."""
-    return _from_canonical(fine, input_vertices, params, [params.keypoint_filter], _Clock())[0]
+def describe_canonical(fine: Mesh, input_vertices: int, params: DescribeParams,
+                       rim: np.ndarray | None = None) -> ShapeDescription:
+    """describe(mesh, params) from canonical_with_rim(mesh, params), for a caller that needs both (the
+    explain view): the mesh is resampled once. Without `rim`, the open boundary of `fine` (the caps of
+    closed holes then count as surface)."""
+    if rim is None:
+        rim = _rim_mask(fine.faces, fine.n_vertices, fine.n_vertices)
+    return _from_canonical(fine, rim, input_vertices, params, [params.keypoint_filter], _Clock())[0]
 
 
-def _from_canonical(fine: Mesh, input_vertices: int, params: DescribeParams,
+def _from_canonical(fine: Mesh, rim: np.ndarray, input_vertices: int, params: DescribeParams,
                     filters: Sequence[KeypointFilter], clock: _Clock) -> list[ShapeDescription]:
     # resampling and smoothing are scale-free: one normalisation, after them, gives unit area
     smoothed = smooth(fine, input_vertices, params)
@@ -216,9 +258,13 @@ def _from_canonical(fine: Mesh, input_vertices: int, params: DescribeParams,
     masks = [detect(raw, work.faces, flt) for flt in filters]
     clock.lap("keypoints")
     hks32, weights = h.astype(np.float32), mass.diagonal().astype(np.float32)
+    # remeshing moves the vertices off the canonical mesh's: its rim is the remeshed mesh's open boundary
+    rim_now = rim if len(rim) == work.n_vertices else _rim_mask(work.faces, work.n_vertices, work.n_vertices)
+    local = local_signature(spectrum, work.vertices, work.faces, mass.diagonal(), rim_now, LOCAL)
+    clock.lap("local")
     return [
         ShapeDescription(hks=hks32, weights=weights, keypoints=mask, eigenvalues=spectrum.eigenvalues,
-                         input_vertices=input_vertices, seconds=dict(clock.laps))
+                         input_vertices=input_vertices, seconds=dict(clock.laps), local=local)
         for mask in masks
     ]
 

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.core.pipeline import ShapeDescription
+from app.services import partial as partial_mod
 from app.services.context import ServiceContext
 from app.services.errors import ConflictError, InvalidInputError, NotFoundError, NotReadyError
 from app.services.live_index import LiveIndex
@@ -23,6 +24,9 @@ class Hit:
     model: ModelRecord
     distance: float
     rank: int
+    forward: float | None = None  # share of the query found in the model (app.services.partial)
+    reverse: float | None = None  # share of the model the query covers
+    partial: bool = False  # ranked by the partial re-ranking
 
 
 @dataclass(frozen=True)
@@ -57,24 +61,50 @@ def _hits(ctx: ServiceContext, dist: np.ndarray, ids: np.ndarray, k: int) -> lis
 
 
 def search_description(
-    ctx: ServiceContext, live: LiveIndex, description: ShapeDescription, k: int, label: str | None = None
+    ctx: ServiceContext, live: LiveIndex, description: ShapeDescription, k: int, label: str | None = None,
+    partial: bool | None = None,
 ) -> SearchResult:
+    """The k nearest models; a piece (partial, or None and the query has a rim) re-ranks the
+    RERANK nearest by their local signatures. Every hit carries forward / reverse scores."""
     check_k(k)
     allowed = _allowed(ctx, label)
+    piece = partial_mod.is_partial(description.local, partial)
+    wanted = max(k, partial_mod.RERANK) if piece else k
     for _ in range(3):  # a vocabulary swap between encode and search: encode again
         t = time.perf_counter()
         vid, vector = live.encode(description)
         t_encode = time.perf_counter() - t
         t = time.perf_counter()
         try:
-            dist, ids, vid = live.search(vector, k, allowed, vocabulary_id=vid)
+            dist, ids, vid = live.search(vector, wanted, allowed, vocabulary_id=vid)
         except NotReadyError:
             if live.pair is None:
                 raise
             continue
         t_search = time.perf_counter() - t
-        return SearchResult(_hits(ctx, dist, ids, k), vid, {"encode": t_encode, "search": t_search})
+        t = time.perf_counter()
+        hits = _scored(ctx, description, _hits(ctx, dist, ids, wanted), k, piece)
+        seconds = {"encode": t_encode, "search": t_search, "partial": time.perf_counter() - t}
+        return SearchResult(hits, vid, seconds)
     raise NotReadyError("the vocabulary is being swapped; retry")
+
+
+def _scored(ctx: ServiceContext, description: ShapeDescription, hits: list[Hit], k: int,
+            piece: bool) -> list[Hit]:
+    """The first k hits with their forward / reverse scores; a piece's hits ordered by partial
+    distance first (models without a local signature after, in their global order)."""
+    if not piece:
+        hits = hits[:k]
+    found = partial_mod.score(ctx, description.local, [h.model.id for h in hits])
+    if piece:
+        rank_of = [m.distance if m is not None else float("inf") for m in found]
+        order = sorted(range(len(hits)), key=lambda j: (rank_of[j], j))
+        hits, found = [hits[j] for j in order[:k]], [found[j] for j in order[:k]]
+    return [
+        Hit(h.model, h.distance, rank, forward=m.forward if m else None, reverse=m.reverse if m else None,
+            partial=piece)
+        for rank, (h, m) in enumerate(zip(hits, found, strict=True), start=1)
+    ]
 
 
 def similar(

@@ -15,7 +15,15 @@ from app.core import pipeline
 from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import laplacian
 from app.core.mesh import Mesh, clean
-from app.core.pipeline import DESCRIPTION_FORMAT, DescribeParams, ShapeDescription, describe, describe_filters
+from app.core.partial import free_boundary, local_signature
+from app.core.pipeline import (
+    DESCRIPTION_FORMAT,
+    LOCAL,
+    DescribeParams,
+    ShapeDescription,
+    describe,
+    describe_filters,
+)
 from app.core.resolution import normalize_scale, to_resolution
 from app.core.smoothing import WEIGHTS, taubin
 from app.core.spectrum import smallest_eigenpairs
@@ -195,7 +203,7 @@ def test_a_spectrum_that_cannot_be_computed_is_an_invalid_mesh(shrec_mesh, monke
 # 162 vertices after one subdivision: 42 * 1.5 < 120 <= 162 <= 120 * 1.5, so to_resolution neither
 # subdivides twice nor decimates
 SMALL = DescribeParams(k=12, m=6, target_vertices=120, smoothing=3, smoothing_weights="uniform")
-STAGES = ["resample", "laplacian", "eigen", "hks", "keypoints"]
+STAGES = ["resample", "laplacian", "eigen", "hks", "keypoints", "local"]
 
 
 def icosphere(subdivisions: int = 1, stretch=(1.0, 1.0, 1.0)) -> Mesh:
@@ -219,15 +227,24 @@ def by_stages(mesh: Mesh, p: DescribeParams, flt: KeypointFilter | None = None) 
     times = hks_mod.time_scales(spectrum.eigenvalues, p.m, p.time_range)
     raw = hks_mod.heat_kernel_signature(spectrum, times)
     mask = detect(raw, work.faces, flt or p.keypoint_filter)
+    rim = free_boundary(work.faces, work.n_vertices)
+    local = local_signature(spectrum, work.vertices, work.faces, mass.diagonal(), rim, LOCAL)
     return ShapeDescription(hks=hks_mod.normalize(raw).astype(np.float32),
                             weights=mass.diagonal().astype(np.float32), keypoints=mask,
-                            eigenvalues=spectrum.eigenvalues, input_vertices=mesh.n_vertices)
+                            eigenvalues=spectrum.eigenvalues, input_vertices=mesh.n_vertices, local=local)
 
 
 def same(a: ShapeDescription, b: ShapeDescription) -> bool:
     return (np.array_equal(a.hks, b.hks) and np.array_equal(a.weights, b.weights)
             and np.array_equal(a.keypoints, b.keypoints) and np.array_equal(a.eigenvalues, b.eigenvalues)
-            and a.input_vertices == b.input_vertices)
+            and a.input_vertices == b.input_vertices and same_local(a, b))
+
+
+def same_local(a: ShapeDescription, b: ShapeDescription) -> bool:
+    if a.local is None or b.local is None:
+        return a.local is b.local
+    return (np.array_equal(a.local.slopes, b.local.slopes) and np.array_equal(a.local.area, b.local.area)
+            and np.array_equal(a.local.valid, b.local.valid) and a.local.rim == b.local.rim)
 
 
 # --- parameters -------------------------------------------------------------------------------------
@@ -406,9 +423,10 @@ def test_a_description_round_trips_through_npz_bit_for_bit(tmp_path):
     assert again.seconds == {}  # timings are not stored
     with np.load(tmp_path / "d.npz") as z:
         assert sorted(z.files) == [
-            "eigenvalues", "format", "hks_packed", "hks_shape", "input_vertices", "keypoints", "weights"
+            "eigenvalues", "format", "hks_packed", "hks_shape", "input_vertices", "keypoints",
+            "local_area", "local_rim", "local_slopes", "local_valid", "weights"
         ]
-        assert int(z["format"]) == DESCRIPTION_FORMAT == 2
+        assert int(z["format"]) == DESCRIPTION_FORMAT == 3
 
 
 def test_save_accepts_a_str_path_and_load_makes_the_keypoints_bool(tmp_path):
@@ -420,14 +438,15 @@ def test_save_accepts_a_str_path_and_load_makes_the_keypoints_bool(tmp_path):
     np.savez(tmp_path / "u8.npz", **fields)  # another writer's 0/1 keypoints
     loaded = ShapeDescription.load(tmp_path / "u8.npz")
     assert loaded.keypoints.dtype == bool and np.array_equal(loaded.keypoints, desc.keypoints)
+    assert loaded.local is None  # descriptions saved before the local signature load without one
 
 
 def test_load_refuses_another_format_in_words(tmp_path):
     desc = describe(CIGAR, SMALL)
     fields = dict(hks=desc.hks, weights=desc.weights, keypoints=desc.keypoints,
-                  eigenvalues=desc.eigenvalues, input_vertices=np.int64(42), format=np.int64(3))
+                  eigenvalues=desc.eigenvalues, input_vertices=np.int64(42), format=np.int64(4))
     np.savez(tmp_path / "v2.npz", **fields)
-    with pytest.raises(ValueError, match="^description format 3 is not 2$"):
+    with pytest.raises(ValueError, match="^description format 4 is not 3$"):
         ShapeDescription.load(tmp_path / "v2.npz")
 
 

@@ -179,7 +179,7 @@ def to_response(result: search.SearchResult, relations: dict[int, str] | None = 
     hits = [
         SearchHit(
             model_id=h.model.id, name=h.model.name, label=h.model.label, distance=h.distance, rank=h.rank,
-            relation=relations.get(h.model.id),
+            forward=h.forward, reverse=h.reverse, partial=h.partial, relation=relations.get(h.model.id),
         )
         for h in result.hits
     ]

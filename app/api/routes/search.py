@@ -21,7 +21,11 @@ SEARCH_BODY = multipart_body(
     "the query mesh",
     k={"type": "integer", "default": 10, "minimum": 1, "maximum": search.MAX_K},
     label={"type": "string", "description": "only return models with this label"},
+    partial={"type": "string", "enum": ["auto", "true", "false"], "default": "auto",
+             "description": "re-rank the nearest models by partial matching: auto does it for a query with "
+                            "a free boundary (a piece, a one-sided scan); true / false force it"},
 )
+PARTIAL = {"auto": None, "true": True, "false": False}
 
 
 @router.post(
@@ -39,6 +43,9 @@ async def search_mesh(request: Request, runtime: RuntimeDep) -> SearchResponse:
         k = search.check_k(int(form.fields.get("k") or 10))
     except ValueError as exc:
         raise InvalidInputError(f"k must be an integer between 1 and {search.MAX_K}") from exc
+    choice = (form.fields.get("partial") or "auto").lower()
+    if choice not in PARTIAL:
+        raise InvalidInputError(f"partial must be auto, true or false, not {choice[:20]!r}")
     runtime.live.require()  # fail fast, before the expensive part, when nothing can answer
     seconds = {"upload": time.perf_counter() - t}
     t = time.perf_counter()
@@ -47,8 +54,9 @@ async def search_mesh(request: Request, runtime: RuntimeDep) -> SearchResponse:
     runtime.metrics.describe_seconds.labels("query").observe(describe_wall)
     seconds.update({f"describe.{name}": v for name, v in stages.items()})
     seconds["describe"] = describe_wall
+    label = form.fields.get("label") or None
     result = await run_in_threadpool(
-        search.search_description, runtime.ctx, runtime.live, description, k, form.fields.get("label") or None
+        search.search_description, runtime.ctx, runtime.live, description, k, label, PARTIAL[choice]
     )
     seconds.update(result.seconds)
     seconds["total"] = sum(v for name, v in seconds.items() if "." not in name)

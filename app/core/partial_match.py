@@ -1,0 +1,101 @@
+"""A query piece against models, by local signatures (app.core.partial): distance, forward, reverse.
+
+For each scale hypothesis (a shift of the query's grid) every trusted query sample finds its nearest
+sample in each model, in slope space (mean squared difference over the slopes the rim leaves it). Per
+model, the hypothesis with the smallest area-weighted mean of these (each capped, so a part the model
+lacks costs a bounded amount) wins; under it
+- forward = the share of the query's trusted area whose nearest model sample is within `tolerance`;
+- reverse = forward x the kept share that the winning scale implies (ratio^-shift, the shift refined
+  between grid steps by a parabola through the scores): the area of the model the matched part of the
+  query stands for, over the model's area. Counting the model samples that some query sample matches
+  would count both legs for one (the slopes are the same on symmetric parts); the scale does not.
+The distance ranks candidates; forward and reverse are what a user reads.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from app.core.partial import LocalParams, LocalSignature
+
+MIN_SLOPES = 4  # a sample with fewer trusted slopes than this sits on the rim: it is not compared
+TOLERANCE = 2e-3  # mean squared slope difference under which two samples match
+CAP = 4 * TOLERANCE  # one unmatched sample costs at most this: a missing part does not swamp the rest
+
+
+@dataclass(frozen=True)
+class PartialMatch:
+    distance: float  # area-weighted mean over query samples of min(nearest squared distance, CAP)
+    forward: float  # in [0, 1]
+    reverse: float  # in [0, 1]
+    scale: float  # kept share the winning scale implies (1: the query is as large as the model)
+
+
+def _sq_distances(q: np.ndarray, qvalid: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """(p, s) mean squared difference over each query sample's trusted leading slopes.
+
+    q (p, J), qvalid (p,) in [MIN_SLOPES, J], m (s, J)."""
+    out = np.empty((len(q), len(m)))
+    for length in np.unique(qvalid):
+        rows = qvalid == length
+        a, b = q[rows, :length].astype(np.float64), m[:, :length].astype(np.float64)
+        d = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * a @ b.T
+        out[rows] = np.maximum(d, 0.0) / length
+    return out
+
+
+def _refine(scores: np.ndarray, best: np.ndarray) -> np.ndarray:
+    """(N,) sub-step position of each column's minimum: a parabola through its neighbours.
+    scores (shifts, N), best (N,) argmin per column."""
+    cols = np.arange(scores.shape[1])
+    inner = (best > 0) & (best < len(scores) - 1)
+    lo = scores[np.clip(best - 1, 0, None), cols]
+    mid = scores[best, cols]
+    hi = scores[np.clip(best + 1, None, len(scores) - 1), cols]
+    curve = lo - 2 * mid + hi
+    step = np.where(inner & (curve > 0), 0.5 * (lo - hi) / np.where(curve > 0, curve, 1.0), 0.0)
+    return best + np.clip(step, -0.5, 0.5)
+
+
+def match_many(query: LocalSignature, models: Sequence[LocalSignature], params: LocalParams,
+               tolerance: float = TOLERANCE, cap: float = CAP) -> list[PartialMatch]:
+    """Score a query against models, all signed with `params` (a model's leading `params.slopes`
+    slopes are its signature; the query's are read in windows, one per scale hypothesis)."""
+    if not models:
+        return []
+    width = params.slopes
+    shifts = min(query.slopes.shape[1] - width + 1, params.shifts)
+    if shifts < 1 or any(m.slopes.shape[1] < width for m in models):
+        raise ValueError(f"signatures shorter than the grid's {width} slopes")
+    kept = [m.valid >= MIN_SLOPES for m in models]
+    counts = np.array([int(k.sum()) for k in kept])
+    usable = [int(i) for i in np.flatnonzero(counts)]  # a model with no trusted sample matches nothing
+    if len(usable) == 0:
+        return [PartialMatch(distance=cap, forward=0.0, reverse=0.0, scale=1.0) for _ in models]
+    stacked = np.concatenate([models[i].slopes[kept[i], :width] for i in usable])  # (S, J)
+    starts = np.concatenate([[0], np.cumsum(counts[usable])[:-1]])
+    scores = np.full((shifts, len(usable)), np.inf)
+    forwards = np.zeros((shifts, len(usable)))
+    for shift in range(shifts):
+        qvalid = np.minimum(query.valid.astype(np.int64) - shift, width)
+        rows = qvalid >= MIN_SLOPES
+        if not rows.any():
+            continue
+        d = _sq_distances(query.slopes[rows, shift:shift + width], qvalid[rows], stacked)  # (p', S)
+        nearest = np.minimum.reduceat(d, starts, axis=1)  # (p', N) per model
+        qa = query.area[rows].astype(np.float64)
+        qa = qa / qa.sum()
+        scores[shift] = qa @ np.minimum(nearest, cap)
+        forwards[shift] = qa @ (nearest <= tolerance)
+    best = np.argmin(scores, axis=0)
+    finite = np.where(np.isfinite(scores), scores, cap)
+    scale = params.ratio ** -_refine(finite, best)
+    out = [PartialMatch(distance=cap, forward=0.0, reverse=0.0, scale=1.0) for _ in models]
+    for c, i in enumerate(usable):
+        fwd = float(min(forwards[best[c], c], 1.0))
+        out[i] = PartialMatch(distance=float(min(finite[best[c], c], cap)), forward=fwd,
+                              reverse=float(min(fwd * scale[c], 1.0)), scale=float(scale[c]))
+    return out

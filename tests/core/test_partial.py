@@ -1,0 +1,177 @@
+"""Local signatures and partial matching (app.core.partial, app.core.partial_match): the mathematics."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from app.core.holes import fill_holes
+from app.core.laplacian import laplacian
+from app.core.mesh import Mesh
+from app.core.partial import (
+    LocalParams,
+    LocalSignature,
+    farthest_points,
+    free_boundary,
+    local_signature,
+    log_slopes,
+    rim_distance,
+    rim_length,
+)
+from app.core.partial_match import match_many
+from app.core.resolution import normalize_scale
+from app.core.spectrum import Spectrum, smallest_eigenpairs
+
+PARAMS = LocalParams(points=64)
+
+
+def unit_mesh(mesh: trimesh.Trimesh) -> Mesh:
+    return normalize_scale(Mesh(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)))
+
+
+def spectrum_of(mesh: Mesh, k: int = 120) -> tuple[Spectrum, np.ndarray]:
+    stiffness, mass = laplacian(mesh.vertices, mesh.faces, "cotangent")
+    return smallest_eigenpairs(stiffness, mass, k), mass.diagonal()
+
+
+@pytest.fixture(scope="module")
+def sphere() -> tuple[Mesh, Spectrum, np.ndarray]:
+    mesh = unit_mesh(trimesh.creation.icosphere(3))  # 642 vertices
+    spectrum, mass = spectrum_of(mesh)
+    return mesh, spectrum, mass
+
+
+def test_slopes_of_a_scaled_surface_are_the_same_slopes_later():
+    """Scaling a surface by s gives λ/s² and φ/s: its slopes at times s²t are the slopes at t, exactly.
+    This is what turns the scale of a piece into a shift of the grid."""
+    rng = np.random.default_rng(0)
+    lam = np.sort(rng.uniform(0, 500, 40))
+    lam[0] = 0.0
+    phi = rng.normal(size=(30, 40))
+    times = PARAMS.times()
+    s = 1.7
+    scaled = log_slopes(Spectrum(lam / s**2, phi / s), times * s**2)
+    assert np.allclose(scaled, log_slopes(Spectrum(lam, phi), times), atol=1e-10)
+
+
+def test_slopes_on_a_sphere_go_from_flat_to_filled(sphere):
+    """A unit-area sphere (R² = 1/4π): at short times K ≈ (1 + t/3R²)/(4πt), a slope of
+    -1 + 4πt/3 (-0.96 at t = 0.01); once heat has filled the sphere K tends to 1/area (slope 0)."""
+    _, spectrum, _ = sphere
+    slopes = log_slopes(spectrum, np.array([1e-2, 1.1e-2, 5.0, 5.5]))
+    assert np.allclose(slopes[:, 0], -1 + 4 * np.pi * 0.0105 / 3, atol=0.03)
+    assert np.allclose(slopes[:, 2], 0.0, atol=1e-3)
+
+
+def test_free_boundary_and_rim_length_by_hand():
+    # the unit square cut in four triangles around its centre: the rim is its 4 sides
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 0]], float)
+    f = np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+    rim = free_boundary(f, 5)
+    assert rim.tolist() == [True, True, True, True, False]
+    assert rim_length(v, f, rim) == pytest.approx(4.0)
+    # scaled by 3: the length over √area does not change
+    assert rim_length(3 * v, f, rim) == pytest.approx(4.0)
+
+
+def test_a_hole_closed_by_a_cap_keeps_its_rim_length():
+    """The cap's centre is flagged as rim with the loop; its spokes are not rim edges."""
+    ball = trimesh.creation.icosphere(3)
+    keep = ball.triangles_center[:, 2] > -0.6  # a sphere with a small hole at the south pole
+    mesh = Mesh(ball.vertices, ball.faces[keep])
+    used = np.unique(mesh.faces)
+    remap = np.full(len(mesh.vertices), -1)
+    remap[used] = np.arange(len(used))
+    mesh = Mesh(mesh.vertices[used], remap[mesh.faces])
+    rim = free_boundary(mesh.faces, mesh.n_vertices)
+    closed, count = fill_holes(mesh, 0.5)
+    assert count == 1
+    capped_rim = np.concatenate([rim, [True]])
+    assert rim_length(closed.vertices, closed.faces, capped_rim) == pytest.approx(
+        rim_length(mesh.vertices, mesh.faces, rim) * np.sqrt(mesh.area() / closed.area()))
+
+
+def test_a_closed_surface_has_no_rim(sphere):
+    mesh, _, _ = sphere
+    rim = free_boundary(mesh.faces, mesh.n_vertices)
+    assert not rim.any() and rim_length(mesh.vertices, mesh.faces, rim) == 0.0
+    assert np.isinf(rim_distance(mesh.vertices, rim)).all()
+
+
+def test_farthest_points_spread_and_never_repeat(sphere):
+    mesh, _, _ = sphere
+    chosen = farthest_points(mesh.vertices, 50)
+    assert chosen[0] == 0 and len(set(chosen.tolist())) == 50
+    gaps = np.linalg.norm(mesh.vertices[chosen][:, None] - mesh.vertices[chosen][None], axis=-1)
+    np.fill_diagonal(gaps, np.inf)
+    # 50 points on a unit-area sphere: none closer than half the spacing of an even cover
+    assert gaps.min() > 0.5 * np.sqrt(1.0 / 50)
+    assert len(farthest_points(mesh.vertices[:10], 50)) == 10
+
+
+def test_signature_areas_sum_to_one_and_a_rim_distrusts_its_neighbourhood():
+    half = trimesh.creation.icosphere(3)
+    keep = half.triangles_center[:, 2] > 0.0
+    mesh = unit_mesh(trimesh.Trimesh(half.vertices, half.faces[keep], process=True))
+    spectrum, mass = spectrum_of(mesh)
+    rim = free_boundary(mesh.faces, mesh.n_vertices)
+    sig = local_signature(spectrum, mesh.vertices, mesh.faces, mass, rim, PARAMS)
+    width = PARAMS.slopes + PARAMS.shifts - 1
+    assert sig.slopes.shape == (64, width) and sig.slopes.dtype == np.float32
+    assert sig.area.sum() == pytest.approx(1.0, abs=1e-5)
+    # a hemisphere's rim: 2π r over √(2π r²) = √(2π); cut along the triangles, it zigzags a little
+    assert np.sqrt(2 * np.pi) < sig.rim < 1.2 * np.sqrt(2 * np.pi)
+    near = rim_distance(mesh.vertices, rim)[farthest_points(mesh.vertices, 64)]
+    assert (sig.valid[near == 0] == 0).all()  # a sample on the rim trusts nothing
+    assert (np.diff(sig.valid[np.argsort(near)]) >= 0).all()  # farther from the rim, more trusted
+
+
+def test_a_model_matches_itself_fully(sphere):
+    mesh, spectrum, mass = sphere
+    rim = np.zeros(mesh.n_vertices, bool)
+    sig = local_signature(spectrum, mesh.vertices, mesh.faces, mass, rim, PARAMS)
+    (m,) = match_many(sig, [sig], PARAMS)
+    assert m.distance == pytest.approx(0.0, abs=1e-9)
+    assert m.forward == 1.0 and m.reverse == pytest.approx(1.0) and m.scale == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("shift", [1, 2, 3])
+def test_a_query_smaller_by_a_grid_step_is_found_at_that_scale(sphere, shift):
+    """A query that is the model's surface with a kept share f = ratio^-shift, normalised to unit area
+    (λ·f, φ·√f), matches at that shift with no loss and reports reverse = f."""
+    mesh, spectrum, mass = sphere
+    rim = np.zeros(mesh.n_vertices, bool)
+    model = local_signature(spectrum, mesh.vertices, mesh.faces, mass, rim, PARAMS)
+    f = PARAMS.ratio ** -shift
+    piece = Spectrum(spectrum.eigenvalues * f, spectrum.eigenvectors * np.sqrt(f))
+    # the same vertices: a scaled copy can pick other samples among the sphere's exact ties
+    query = local_signature(piece, mesh.vertices, mesh.faces, mass / f, rim, PARAMS)
+    (m,) = match_many(query, [model], PARAMS)
+    assert m.distance == pytest.approx(0.0, abs=1e-9)
+    assert m.scale == pytest.approx(f, rel=0.02)
+    assert m.forward == 1.0 and m.reverse == pytest.approx(f, rel=0.02)
+
+
+def test_another_shape_matches_less_than_the_same_one(sphere):
+    mesh, spectrum, mass = sphere
+    none = np.zeros(mesh.n_vertices, bool)
+    ball = local_signature(spectrum, mesh.vertices, mesh.faces, mass, none, PARAMS)
+    cigar = unit_mesh(trimesh.creation.capsule(height=4.0, radius=0.4, count=[24, 24]))
+    c_spec, c_mass = spectrum_of(cigar)
+    tube = local_signature(c_spec, cigar.vertices, cigar.faces, c_mass, np.zeros(cigar.n_vertices, bool),
+                           PARAMS)
+    same, other = match_many(ball, [ball, tube], PARAMS)
+    assert same.distance < other.distance and same.forward > other.forward
+
+
+def test_models_without_trusted_samples_score_nothing_and_grids_are_checked(sphere):
+    mesh, spectrum, mass = sphere
+    sig = local_signature(spectrum, mesh.vertices, mesh.faces, mass, np.zeros(mesh.n_vertices, bool), PARAMS)
+    rimmed = LocalSignature(sig.slopes, sig.area, np.zeros_like(sig.valid), 1.0)
+    got, _ = match_many(sig, [rimmed, sig], PARAMS)
+    assert got.forward == 0.0 and got.reverse == 0.0
+    assert match_many(sig, [], PARAMS) == []
+    short = LocalSignature(sig.slopes[:, :3], sig.area, sig.valid, 0.0)
+    with pytest.raises(ValueError, match="shorter"):
+        match_many(sig, [short], PARAMS)
