@@ -52,8 +52,10 @@ def own_peak_mb() -> float:
     return peak_rss_mb()
 
 
-def legacy_simplify(mesh, target_vertices: int, tolerance: float = 1.5, max_passes: int = 3):
-    """resolution.simplify before issue 10 (agg=3 only, at the mesh's own scale): the baseline."""
+def legacy_simplify(mesh, target_vertices: int, tolerance: float = 1.5, prefilter_length: float = 0.0,
+                    max_passes: int = 3):
+    """resolution.simplify before issue 10 (agg=3 only, at the mesh's own scale, no low-pass): the
+    baseline. Same signature as resolution.simplify, whose caller passes the low-pass length."""
     import fast_simplification
     import numpy as np
 
