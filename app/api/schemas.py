@@ -187,6 +187,17 @@ class VariantPublic(BaseModel):
     same_triangles: bool
     transform: list[list[float]] = Field(description="4 x 4, this model (or its matched part) onto the other")
     copies: int
+    lies_on_other: bool | None = Field(
+        None, description="one-sided test (re-triangulated when the symmetric distances are too large):"
+        " true when this model's vertices lie on the other's surface (a coarser copy), false when the"
+        " other's lie on this one; null when the test was not needed"
+    )
+    resolution: float | None = Field(None, description="the lying model's mean edge / diagonal")
+    slack: float | None = Field(None, description="the length its tolerances grow with / diagonal")
+    vertex_gap: float | None = Field(
+        None, description="99 % of its vertices lie within this of the other surface (/ diagonal)"
+    )
+    uncovered: float | None = Field(None, description="90 % of the other surface lies within this of it")
     decision: VariantDecisionPublic | None = Field(None, description="the latest reviewer decision")
 
 

@@ -9,7 +9,20 @@ import trimesh
 
 from app.core.mesh import Mesh, load_mesh
 from app.core.variants import Prepared, relate
-from app.core.variants.onesided import COVER_TOL, VERTEX_MAX, VERTEX_TOL, lies_on, mean_edge, side
+from app.core.variants.onesided import (
+    COVER_FLOOR,
+    COVER_TOL,
+    FULL_COARSENING,
+    RESOLUTION_CAP,
+    VERTEX_FLOOR,
+    VERTEX_MAX,
+    VERTEX_MAX_FLOOR,
+    VERTEX_TOL,
+    lies_on,
+    mean_edge,
+    side,
+    slack,
+)
 from tests.conftest import dataset_or_skip
 
 
@@ -33,18 +46,27 @@ def fine() -> Prepared:
     return Prepared(_torus(96, 32, spike=True))
 
 
+def test_slack_grows_with_the_coarsening() -> None:
+    assert slack(0.1, 0.1) == 0.0 and slack(0.1, 0.2) == 0.0  # no coarser: no slack
+    assert slack(0.1, 0.1 / (1 + 0.5 * (FULL_COARSENING - 1))) == pytest.approx(0.05)  # halfway
+    assert slack(0.1, 0.01) == pytest.approx(0.1)  # a decimation to a tenth: the whole edge
+    assert slack(0.5, 0.01) == pytest.approx(RESOLUTION_CAP)  # a few huge triangles buy no more
+
+
 def test_side_by_hand() -> None:
-    """Margins are the gaps in units of the tolerances times the lying mesh's mean edge."""
+    """Margins are the gaps over the tolerances: slack-scaled, or the floors when that is smaller."""
     vertex = np.array([0.0] * 98 + [0.02, 0.03])  # (100,): largest 0.03
     other = np.linspace(0.0, 0.1, 11)  # 90 % quantile 0.09
-    e, gap, uncovered, margin = side(vertex, other, edge=0.5)
-    assert e == pytest.approx(0.2)  # capped: a few huge triangles buy no slack
+    e, s, gap, uncovered, margin = side(vertex, other, edge=0.5, other_edge=0.05)
+    assert (e, s) == (0.5, pytest.approx(RESOLUTION_CAP))
     assert gap == pytest.approx(np.quantile(vertex, 0.99)) and uncovered == pytest.approx(0.09)
-    expected = max(gap / (VERTEX_TOL * 0.2), 0.03 / (VERTEX_MAX * 0.2), 0.09 / (COVER_TOL * 0.2))
+    expected = max(gap / (VERTEX_TOL * s), 0.03 / (VERTEX_MAX * s), 0.09 / (COVER_TOL * s))
     assert margin == pytest.approx(expected)
-    on = lies_on(vertex, other, 0.5, vertex * 10, other * 10, 0.5)  # the b side is ten times worse
+    *_, same = side(vertex, other, edge=0.05, other_edge=0.05)  # same resolution: the floors
+    assert same == pytest.approx(max(gap / VERTEX_FLOOR, 0.03 / VERTEX_MAX_FLOOR, 0.09 / COVER_FLOOR))
+    on = lies_on(vertex, other, 0.5, vertex * 10, other * 10, 0.05)  # the b side is ten times worse
     assert on.a_on_b and on.margin == pytest.approx(margin)
-    assert not lies_on(vertex * 10, other * 10, 0.5, vertex, other, 0.5).a_on_b
+    assert not lies_on(vertex * 10, other * 10, 0.05, vertex, other, 0.5).a_on_b
 
 
 def test_mean_edge_of_a_unit_square() -> None:

@@ -4,15 +4,19 @@ A decimated or remeshed copy is coarser than its original, and its *vertices* li
 original surface, while its flat triangles cut across the curved original by an amount that grows with
 the triangle size; thin parts it dropped leave some of the original uncovered. A symmetric mean distance
 mixes the two and, for a 25-vertex copy of a 250-vertex mesh, reads like two different members of one
-class. Here the test is one-sided and measured in the lying mesh's own resolution (its mean edge length
-`e`, capped at RESOLUTION_CAP of the diagonal so that a few huge flat triangles buy no slack):
+class. Here the test is one-sided, with tolerances that grow with how much coarser the lying mesh is:
 
-- the lying mesh's vertices: 99 % within VERTEX_TOL e of the other surface, all within VERTEX_MAX e;
-- the other surface is covered: 90 % of its area within COVER_TOL e of the lying mesh.
+- its slack `s` is its mean edge length (at most RESOLUTION_CAP of the diagonal, so that a few huge
+  flat triangles buy nothing) times its coarsening: 0 when it is no coarser than the other, rising to
+  1 when its edges are FULL_COARSENING times as long (a decimation to 10 % is about 3 times);
+- 99 % of its vertices within max(VERTEX_FLOOR, VERTEX_TOL s) of the other surface, every one within
+  max(VERTEX_MAX_FLOOR, VERTEX_MAX s): a remesh at the same resolution must lie on the surface;
+- the other surface covered: 90 % of its area within max(COVER_FLOOR, COVER_TOL s) of the lying mesh
+  (a thin part dropped is a small fraction of the area, however far it reaches).
 
-Two poses of one object (a laptop opened further) or two members of a class fail: some of their
-vertices are several edge lengths off the other surface, or a large part of it is far from them.
-Both directions are tried; the better one is the evidence.
+Two poses of one object (a laptop opened further), two members of a class, two coarse blobs at one
+resolution fail: some of their vertices are off the other surface by several per cent of the diagonal,
+or a large part of it is far from them. Both directions are tried; the better one is the evidence.
 """
 
 from __future__ import annotations
@@ -23,10 +27,14 @@ import numpy as np
 
 from app.core.meshdata import Mesh
 
-VERTEX_TOL = 0.4  # 99 % of the lying mesh's vertices within 0.4 of its mean edge of the other surface
-VERTEX_MAX = 0.6  # ... and every one within 0.6
-COVER_TOL = 0.6  # 90 % of the other surface within 0.6 mean edges of the lying mesh
+VERTEX_TOL = 0.4  # 99 % of the lying mesh's vertices within 0.4 slack of the other surface ...
+VERTEX_FLOOR = 0.015  # ... or 1.5 % of the diagonal
+VERTEX_MAX = 0.6  # every vertex within 0.6 slack ...
+VERTEX_MAX_FLOOR = 0.02  # ... or 2 %
+COVER_TOL = 0.6  # 90 % of the other surface within 0.6 slack of the lying mesh ...
+COVER_FLOOR = 0.03  # ... or 3 %
 RESOLUTION_CAP = 0.2  # the edge length used is at most 20 % of the diagonal
+FULL_COARSENING = 2.0  # edges this many times the other's: the whole edge length is slack
 MAX_VERTICES = 4096  # vertices measured per mesh (an even stride through larger meshes)
 
 
@@ -35,15 +43,16 @@ class LiesOn:
     """Evidence that one mesh lies on the other, all lengths relative to the stored mesh's diagonal.
 
     a_on_b     : True when `a` (the query) is the lying mesh, False when `b` is
-    resolution : the lying mesh's mean edge length (capped)
+    resolution : the lying mesh's mean edge length
+    slack      : the length its tolerances grow with (module docstring)
     vertex_gap : 99 % quantile of its vertices' distances to the other surface
     uncovered  : 90 % quantile of the other surface's distances to it
-    margin     : max(vertex_gap / (VERTEX_TOL e), largest vertex distance / (VERTEX_MAX e),
-                 uncovered / (COVER_TOL e)); below 1 the test is passed
+    margin     : the largest of the three measures over its tolerance; below 1 the test is passed
     """
 
     a_on_b: bool
     resolution: float
+    slack: float
     vertex_gap: float
     uncovered: float
     margin: float
@@ -61,16 +70,25 @@ def vertex_subset(mesh: Mesh) -> np.ndarray:
     return used[:: max(1, -(-len(used) // MAX_VERTICES))]
 
 
-def side(vertex_dist: np.ndarray, other_dist: np.ndarray, edge: float) -> tuple[float, float, float, float]:
-    """(resolution, vertex_gap, uncovered, margin) for one direction. vertex_dist (n,): the lying
-    mesh's vertices to the other surface; other_dist (m,): the other's surface samples to the lying
-    mesh; edge: the lying mesh's mean edge; all in one unit (relative to the diagonal)."""
-    e = max(min(edge, RESOLUTION_CAP), 1e-12)
+def slack(edge: float, other_edge: float) -> float:
+    """The lying mesh's mean edge (capped) times its coarsening against the other's mean edge."""
+    coarsening = (edge / max(other_edge, 1e-300) - 1.0) / (FULL_COARSENING - 1.0)
+    return min(edge, RESOLUTION_CAP) * float(np.clip(coarsening, 0.0, 1.0))
+
+
+def side(
+    vertex_dist: np.ndarray, other_dist: np.ndarray, edge: float, other_edge: float
+) -> tuple[float, float, float, float, float]:
+    """(resolution, slack, vertex_gap, uncovered, margin) for one direction. vertex_dist (n,): the
+    lying mesh's vertices to the other surface; other_dist (m,): the other's surface samples to the
+    lying mesh; edge, other_edge: the two mean edges; all in one unit (relative to the diagonal)."""
+    s = slack(edge, other_edge)
     gap = float(np.quantile(vertex_dist, 0.99))
-    uncovered = float(np.quantile(other_dist, 0.9))
     worst = float(vertex_dist.max())
-    margin = max(gap / (VERTEX_TOL * e), worst / (VERTEX_MAX * e), uncovered / (COVER_TOL * e))
-    return e, gap, uncovered, margin
+    uncovered = float(np.quantile(other_dist, 0.9))
+    margin = max(gap / max(VERTEX_FLOOR, VERTEX_TOL * s), worst / max(VERTEX_MAX_FLOOR, VERTEX_MAX * s),
+                 uncovered / max(COVER_FLOOR, COVER_TOL * s))
+    return edge, s, gap, uncovered, margin
 
 
 def lies_on(
@@ -80,8 +98,8 @@ def lies_on(
     """The better of "a lies on b" and "b lies on a". a_vertex_dist (n,): a's vertices to b's surface;
     b_sample_dist (m,): b's surface samples to a's surface; a_edge: a's mean edge; likewise for b.
     Everything relative to one length (the diagonal of b)."""
-    a_side = side(a_vertex_dist, b_sample_dist, a_edge)
-    b_side = side(b_vertex_dist, a_sample_dist, b_edge)
-    if a_side[3] <= b_side[3]:
+    a_side = side(a_vertex_dist, b_sample_dist, a_edge, b_edge)
+    b_side = side(b_vertex_dist, a_sample_dist, b_edge, a_edge)
+    if a_side[4] <= b_side[4]:
         return LiesOn(True, *a_side)
     return LiesOn(False, *b_side)

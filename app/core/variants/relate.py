@@ -58,6 +58,7 @@ class Evidence:
     # one-sided test (onesided.py), when the symmetric one failed: does one mesh lie on the other?
     lies_on_other: bool | None = None  # True: a lies on b (a is the coarser copy); False: b on a
     resolution: float | None = None  # the lying mesh's mean edge / diagonal of b
+    slack: float | None = None  # what its tolerances grow with: that edge times its coarsening
     vertex_gap: float | None = None  # 99 % of its vertices within this of the other surface
     uncovered: float | None = None  # 90 % of the other surface within this of it
 
@@ -183,8 +184,8 @@ def _evidence(a: Prepared, b: Prepared, sim: Similarity, one_sided: bool = True)
             a.distance_to(inverse.apply(vertex_subset(b.mesh))) * sim.scale / diag, ab / diag,
             b.mean_edge / diag,
         )
-        extra = {"lies_on_other": on.a_on_b, "resolution": on.resolution, "vertex_gap": on.vertex_gap,
-                 "uncovered": on.uncovered}
+        extra = {"lies_on_other": on.a_on_b, "resolution": on.resolution, "slack": on.slack,
+                 "vertex_gap": on.vertex_gap, "uncovered": on.uncovered}
         margin = min(margin, on.margin)
     if margin < 1.0:
         relation, confidence = "retriangulated", 1.0 - 0.5 * margin
