@@ -151,9 +151,13 @@ class SearchHit(BaseModel):
     distance: float = Field(description="L1 distance between BoF vectors (+ scaled Shape-DNA when fused)")
     rank: int
     relation: str | None = Field(
-        None, description="the verified variant relation to the query model, when there is one (GET"
-        " /models/{id}/similar): identical | moved | rescaled | mirrored | retriangulated | part_of"
-        " | contains"
+        None, description="the verified variant relation of the query to this model, when there is one"
+        " (GET /models/{id}/similar: stored links; POST /search: verified for the query within the query"
+        " pool's deadline): identical | moved | rescaled | mirrored | retriangulated | part_of | contains"
+    )
+    evidence: dict[str, Any] | None = Field(
+        None, description="POST /search: the numbers behind `relation` (confidence, chamfer, hausdorff,"
+        " forward, reverse, scale, mirrored, transform: the query onto this model, ...)"
     )
 
 

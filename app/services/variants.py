@@ -35,7 +35,7 @@ class FingerprintCache:
         self._seq = 0
         self._index = FingerprintIndex()
 
-    def candidates(self, ctx: ServiceContext, queries: np.ndarray, exclude: int) -> list[int]:
+    def candidates(self, ctx: ServiceContext, queries: np.ndarray, exclude: int | None) -> list[int]:
         with self._lock:
             with ctx.db.read() as conn:
                 ids, vectors, seq = variants_repo.fingerprints_since(
@@ -106,6 +106,11 @@ def stored_prepared(ctx: ServiceContext, sha256: str, file_type: str) -> Prepare
         return load_mesh(data, file_type, ctx.settings.max_vertices)
 
     return prepared_cache(ctx).get((sha256, file_type), load)
+
+
+def lookup(ctx: ServiceContext, vectors: np.ndarray) -> list[int]:
+    """The stored models worth verifying for a mesh with these fingerprints (1 + objects, DIM)."""
+    return _cache(ctx).candidates(ctx, vectors, exclude=None)
 
 
 def detect(ctx: ServiceContext, model_id: int, mesh: Mesh) -> list[dict]:
@@ -249,6 +254,6 @@ def decide(ctx: ServiceContext, model_id: int, other_id: int, decision: str, not
 
 
 __all__ = [
-    "Evidence", "PreparedCache", "backfill", "brief", "decide", "detect", "prepared_cache", "relations_with",
-    "reverse", "timed_detect", "variants_of",
+    "Evidence", "PreparedCache", "backfill", "brief", "decide", "detect", "lookup", "prepared_cache",
+    "relations_with", "reverse", "timed_detect", "variants_of",
 ]
