@@ -94,7 +94,10 @@ def _cache(ctx: ServiceContext) -> FingerprintCache:
     return _CACHES.setdefault(_key(ctx), FingerprintCache())
 
 
-def prepared_cache(ctx: ServiceContext) -> PreparedCache:
+def prepared_cache(ctx: ServiceContext, replace: PreparedCache | None = None) -> PreparedCache:
+    """This collection's cache of prepared candidates (`replace`: use that one from now on)."""
+    if replace is not None:
+        _PREPARED[_key(ctx)] = replace
     return _PREPARED.setdefault(_key(ctx), PreparedCache())
 
 
