@@ -118,3 +118,18 @@ def test_two_poses_of_a_laptop_are_not_variants() -> None:
     base = sorted(files.values())[0]
     ev = relate(Prepared(load_mesh(files["T313.obj"])), Prepared(load_mesh(base)))
     assert ev.relation == "similar"
+
+
+@pytest.mark.parametrize("seeds", [(5, 9), (7, 8), (5, 7)])
+def test_two_coarse_blobs_at_one_resolution_are_only_similar(seeds) -> None:
+    """Convex hulls of 80 random points (about 20 vertices, edges a third of the diagonal): each one's
+    vertices are within 0.3 edge lengths of the other's surface, which a tolerance proportional to the
+    edge alone would accept; neither is coarser than the other, so the floors apply."""
+
+    def hull(seed: int) -> Mesh:
+        tm = trimesh.convex.convex_hull(np.random.default_rng(seed).normal(size=(80, 3)) * [1.0, 0.6, 0.35])
+        return Mesh(np.asarray(tm.vertices), np.asarray(tm.faces, np.int64))
+
+    ev = relate(Prepared(hull(seeds[0])), Prepared(hull(seeds[1])))
+    assert ev.relation == "similar"
+    assert ev.slack is not None and ev.vertex_gap is not None and ev.vertex_gap > 0.015
