@@ -6,9 +6,10 @@ the triangle size; thin parts it dropped leave some of the original uncovered. A
 mixes the two and, for a 25-vertex copy of a 250-vertex mesh, reads like two different members of one
 class. Here the test is one-sided, with tolerances that grow with how much coarser the lying mesh is:
 
-- its slack `s` is its mean edge length (at most RESOLUTION_CAP of the diagonal, so that a few huge
-  flat triangles buy nothing) times its coarsening: 0 when it is no coarser than the other, rising to
-  1 when its edges are FULL_COARSENING times as long (a decimation to 10 % is about 3 times);
+- it has at least MIN_VERTICES vertices, and its slack `s` is its mean edge length (at most
+  RESOLUTION_CAP of the diagonal, so that a few huge flat triangles buy nothing) times its coarsening:
+  0 when it is no coarser than the other, rising to 1 when its edges are FULL_COARSENING times as long
+  (a decimation to 10 % is about 3 times);
 - 99 % of its vertices within max(VERTEX_FLOOR, VERTEX_TOL s) of the other surface, every one within
   max(VERTEX_MAX_FLOOR, VERTEX_MAX s): a remesh at the same resolution must lie on the surface;
 - the other surface covered: 90 % of its area within max(COVER_FLOOR, COVER_TOL s) of the lying mesh
@@ -31,9 +32,10 @@ VERTEX_TOL = 0.4  # 99 % of the lying mesh's vertices within 0.4 slack of the ot
 VERTEX_FLOOR = 0.015  # ... or 1.5 % of the diagonal
 VERTEX_MAX = 0.6  # every vertex within 0.6 slack ...
 VERTEX_MAX_FLOOR = 0.02  # ... or 2 %
-COVER_TOL = 0.6  # 90 % of the other surface within 0.6 slack of the lying mesh ...
+COVER_TOL = 0.5  # 90 % of the other surface within 0.5 slack of the lying mesh ...
 COVER_FLOOR = 0.03  # ... or 3 %
-RESOLUTION_CAP = 0.2  # the edge length used is at most 20 % of the diagonal
+RESOLUTION_CAP = 0.15  # the edge length used is at most 15 % of the diagonal
+MIN_VERTICES = 20  # a mesh of fewer vertices (a box) is too coarse to be said to lie on anything
 FULL_COARSENING = 2.0  # edges this many times the other's: the whole edge length is slack
 MAX_VERTICES = 4096  # vertices measured per mesh (an even stride through larger meshes)
 
@@ -81,13 +83,16 @@ def side(
 ) -> tuple[float, float, float, float, float]:
     """(resolution, slack, vertex_gap, uncovered, margin) for one direction. vertex_dist (n,): the
     lying mesh's vertices to the other surface; other_dist (m,): the other's surface samples to the
-    lying mesh; edge, other_edge: the two mean edges; all in one unit (relative to the diagonal)."""
+    lying mesh; edge, other_edge: the two mean edges; all in one unit (relative to the diagonal).
+    The margin is infinite for a lying mesh of fewer than MIN_VERTICES vertices."""
     s = slack(edge, other_edge)
     gap = float(np.quantile(vertex_dist, 0.99))
     worst = float(vertex_dist.max())
     uncovered = float(np.quantile(other_dist, 0.9))
     margin = max(gap / max(VERTEX_FLOOR, VERTEX_TOL * s), worst / max(VERTEX_MAX_FLOOR, VERTEX_MAX * s),
                  uncovered / max(COVER_FLOOR, COVER_TOL * s))
+    if len(vertex_dist) < MIN_VERTICES:
+        margin = float("inf")
     return edge, s, gap, uncovered, margin
 
 
