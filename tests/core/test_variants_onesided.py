@@ -13,6 +13,7 @@ from app.core.variants.onesided import (
     COVER_FLOOR,
     COVER_TOL,
     FULL_COARSENING,
+    MIN_VERTICES,
     RESOLUTION_CAP,
     VERTEX_FLOOR,
     VERTEX_MAX,
@@ -64,6 +65,8 @@ def test_side_by_hand() -> None:
     assert margin == pytest.approx(expected)
     *_, same = side(vertex, other, edge=0.05, other_edge=0.05)  # same resolution: the floors
     assert same == pytest.approx(max(gap / VERTEX_FLOOR, 0.03 / VERTEX_MAX_FLOOR, 0.09 / COVER_FLOOR))
+    *_, few = side(vertex[:MIN_VERTICES - 1], other, edge=0.5, other_edge=0.05)
+    assert few == float("inf")  # a box's 8 corners lie on anything blocky: too few to say
     on = lies_on(vertex, other, 0.5, vertex * 10, other * 10, 0.05)  # the b side is ten times worse
     assert on.a_on_b and on.margin == pytest.approx(margin)
     assert not lies_on(vertex * 10, other * 10, 0.05, vertex, other, 0.5).a_on_b
