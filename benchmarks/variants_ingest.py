@@ -75,6 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     for cached in (True, False):
         with tempfile.TemporaryDirectory() as tmp:
             rows.append(run(files, open_context(Settings(data_dir=Path(tmp) / "data")), cached))
+        print(rows[-1], flush=True)  # each run as it ends: a long one may be cut short
     title = f"ingest of {len(files)} realworld meshes, the variant step with and without the cache"
     print(table(rows, title=title))
     print(machine())
