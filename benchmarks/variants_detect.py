@@ -186,7 +186,8 @@ def lookup_cost(fingerprints: np.ndarray, sizes: list[int], rng: np.random.Gener
 def ingest_cost(bases: list[tuple[str, Prepared]], run: Run) -> dict:
     """Per realworld base: describe (the ingest job's numerical work) against the variant step
     (fingerprints of the whole and its objects, lookup, verification of the candidates prepared
-    afresh; the service also parses each candidate's file, not counted here)."""
+    afresh, the worst case: the service keeps prepared candidates in a cache). The service's own
+    path, parsing included, with and without that cache: benchmarks/variants_ingest.py."""
     from app.config import Settings
     from app.core.pipeline import describe
 

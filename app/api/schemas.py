@@ -161,9 +161,13 @@ class SearchHit(BaseModel):
         False, description="true when the query was taken for a piece and the hits re-ranked by partial match"
     )
     relation: str | None = Field(
-        None, description="the verified variant relation to the query model, when there is one (GET"
-        " /models/{id}/similar): identical | moved | rescaled | mirrored | retriangulated | part_of"
-        " | contains"
+        None, description="the verified variant relation of the query to this model, when there is one"
+        " (GET /models/{id}/similar: stored links; POST /search: verified for the query within the query"
+        " pool's deadline): identical | moved | rescaled | mirrored | retriangulated | part_of | contains"
+    )
+    evidence: dict[str, Any] | None = Field(
+        None, description="POST /search: the numbers behind `relation` (confidence, chamfer, hausdorff,"
+        " forward, reverse, scale, mirrored, transform: the query onto this model, ...)"
     )
 
 
@@ -197,6 +201,17 @@ class VariantPublic(BaseModel):
     same_triangles: bool
     transform: list[list[float]] = Field(description="4 x 4, this model (or its matched part) onto the other")
     copies: int
+    lies_on_other: bool | None = Field(
+        None, description="one-sided test (re-triangulated when the symmetric distances are too large):"
+        " true when this model's vertices lie on the other's surface (a coarser copy), false when the"
+        " other's lie on this one; null when the test was not needed"
+    )
+    resolution: float | None = Field(None, description="the lying model's mean edge / diagonal")
+    slack: float | None = Field(None, description="the length its tolerances grow with / diagonal")
+    vertex_gap: float | None = Field(
+        None, description="99 % of its vertices lie within this of the other surface (/ diagonal)"
+    )
+    uncovered: float | None = Field(None, description="90 % of the other surface lies within this of it")
     decision: VariantDecisionPublic | None = Field(None, description="the latest reviewer decision")
 
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import OrderedDict
+from collections.abc import Callable
 
 import numpy as np
 
@@ -33,7 +35,7 @@ class FingerprintCache:
         self._seq = 0
         self._index = FingerprintIndex()
 
-    def candidates(self, ctx: ServiceContext, queries: np.ndarray, exclude: int) -> list[int]:
+    def candidates(self, ctx: ServiceContext, queries: np.ndarray, exclude: int | None) -> list[int]:
         with self._lock:
             with ctx.db.read() as conn:
                 ids, vectors, seq = variants_repo.fingerprints_since(
@@ -45,12 +47,73 @@ class FingerprintCache:
             return shortlist(self._index, queries, exclude)
 
 
+class PreparedCache:
+    """The stored candidates' meshes, parsed and prepared (samples, k-d trees), kept for the next ingest
+    that meets them: least recently used first out, at most `max_models` meshes and `max_vertices`
+    vertices in all. Keyed by content (sha256, format), so a deleted model's entry is merely unused."""
+
+    def __init__(self, max_models: int = 64, max_vertices: int = 2_000_000) -> None:
+        self.max_models, self.max_vertices = max_models, max_vertices
+        self._lock = threading.Lock()
+        self._items: OrderedDict[tuple[str, str], Prepared] = OrderedDict()
+        self._vertices = 0
+        self.hits = self.misses = 0
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def get(self, key: tuple[str, str], load: Callable[[], Mesh]) -> Prepared:
+        with self._lock:
+            found = self._items.get(key)
+            if found is not None:
+                self._items.move_to_end(key)
+                self.hits += 1
+                return found
+            self.misses += 1
+        prepared = Prepared(load())  # outside the lock: parsing a large file must not hold up others
+        n = prepared.mesh.n_vertices
+        with self._lock:
+            if key not in self._items and n <= self.max_vertices:
+                self._items[key] = prepared
+                self._vertices += n
+                while len(self._items) > self.max_models or self._vertices > self.max_vertices:
+                    _, old = self._items.popitem(last=False)
+                    self._vertices -= old.mesh.n_vertices
+        return prepared
+
+
 _CACHES: dict[str, FingerprintCache] = {}
+_PREPARED: dict[str, PreparedCache] = {}
+
+
+def _key(ctx: ServiceContext) -> str:
+    return ctx.settings.database_url or str(ctx.data_dir)
 
 
 def _cache(ctx: ServiceContext) -> FingerprintCache:
-    key = ctx.settings.database_url or str(ctx.data_dir)
-    return _CACHES.setdefault(key, FingerprintCache())
+    return _CACHES.setdefault(_key(ctx), FingerprintCache())
+
+
+def prepared_cache(ctx: ServiceContext, replace: PreparedCache | None = None) -> PreparedCache:
+    """This collection's cache of prepared candidates (`replace`: use that one from now on)."""
+    if replace is not None:
+        _PREPARED[_key(ctx)] = replace
+    return _PREPARED.setdefault(_key(ctx), PreparedCache())
+
+
+def stored_prepared(ctx: ServiceContext, sha256: str, file_type: str) -> Prepared:
+    """A stored file's mesh, prepared, from the cache or read and parsed (InvalidMeshError, OSError)."""
+
+    def load() -> Mesh:
+        data = ctx.blobs.mesh_path(sha256, file_type).read_bytes()
+        return load_mesh(data, file_type, ctx.settings.max_vertices)
+
+    return prepared_cache(ctx).get((sha256, file_type), load)
+
+
+def lookup(ctx: ServiceContext, vectors: np.ndarray) -> list[int]:
+    """The stored models worth verifying for a mesh with these fingerprints (1 + objects, DIM)."""
+    return _cache(ctx).candidates(ctx, vectors, exclude=None)
 
 
 def detect(ctx: ServiceContext, model_id: int, mesh: Mesh) -> list[dict]:
@@ -70,8 +133,7 @@ def detect(ctx: ServiceContext, model_id: int, mesh: Mesh) -> list[dict]:
         if other is None or other.status == "failed":
             continue
         try:
-            data = ctx.blobs.mesh_path(other.sha256, other.file_type).read_bytes()
-            ev = relate(prepared, Prepared(load_mesh(data, other.file_type, ctx.settings.max_vertices)))
+            ev = relate(prepared, stored_prepared(ctx, other.sha256, other.file_type))
         except (InvalidMeshError, OSError) as exc:  # a stored file gone or unreadable: no evidence
             log.warning("variant check of model %s against %s skipped: %s", model_id, other_id, exc)
             continue
@@ -95,6 +157,33 @@ def timed_detect(ctx: ServiceContext, model_id: int, mesh: Mesh) -> tuple[list[d
         log.warning("variant detection for model %s failed: %s", model_id, exc)
         found = []
     return found, time.perf_counter() - t
+
+
+def backfill(ctx: ServiceContext, progress: Callable[[int, int, int], None] | None = None) -> dict:
+    """Fingerprints and links for the ready models that have none of this recipe version (stored
+    before the variant step, or under an older FINGERPRINT_VERSION), oldest first, each as its ingest
+    would have done it. Idempotent: a second run finds nothing to do. progress(done, total, model id)."""
+    with ctx.db.read() as conn:
+        todo = variants_repo.ready_without_fingerprints(conn, FINGERPRINT_VERSION)
+    done, linked, skipped = 0, 0, []
+    for n, model_id in enumerate(todo, start=1):
+        with ctx.db.read() as conn:
+            model = models_repo.get(conn, model_id)
+        if model is None or model.status != "ready":
+            continue  # deleted or re-queued meanwhile (its job does it)
+        try:
+            mesh = load_mesh(ctx.blobs.mesh_path(model.sha256, model.file_type).read_bytes(), model.file_type,
+                             ctx.settings.max_vertices)
+        except (InvalidMeshError, OSError) as exc:
+            skipped.append({"model_id": model_id, "reason": str(exc)})
+            continue
+        found, _ = timed_detect(ctx, model_id, mesh)
+        done += 1
+        linked += len(found)
+        if progress is not None:
+            progress(n, len(todo), model_id)
+    return {"missing": len(todo), "fingerprinted": done, "links": linked, "skipped": skipped,
+            "version": FINGERPRINT_VERSION}
 
 
 def variants_of(ctx: ServiceContext, model_id: int) -> list[dict]:
@@ -147,6 +236,8 @@ def reverse(evidence: dict) -> dict:
     out["forward"], out["reverse"] = evidence["reverse"], evidence["forward"]
     out["scale"] = 1.0 / evidence["scale"]
     out["transform"] = np.linalg.inv(np.asarray(evidence["transform"])).tolist()
+    if evidence.get("lies_on_other") is not None:  # which of the two lies on the other's surface
+        out["lies_on_other"] = not evidence["lies_on_other"]
     return out
 
 
@@ -166,5 +257,6 @@ def decide(ctx: ServiceContext, model_id: int, other_id: int, decision: str, not
 
 
 __all__ = [
-    "Evidence", "brief", "decide", "detect", "relations_with", "reverse", "timed_detect", "variants_of",
+    "Evidence", "PreparedCache", "backfill", "brief", "decide", "detect", "lookup", "prepared_cache",
+    "relations_with", "reverse", "timed_detect", "variants_of",
 ]

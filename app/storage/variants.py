@@ -36,6 +36,17 @@ def fingerprints_since(
     return ids, vectors, int(rows[-1][0])
 
 
+def ready_without_fingerprints(conn: sqlite3.Connection, version: int) -> list[int]:
+    """Ready models with no fingerprint of this recipe version (stored before the variant step, or
+    under an older recipe), oldest first."""
+    rows = conn.execute(
+        "SELECT id FROM models WHERE status = 'ready' AND NOT EXISTS (SELECT 1 FROM fingerprints f"
+        " WHERE f.model_id = models.id AND f.version = ?) ORDER BY id",
+        (version,),
+    ).fetchall()
+    return [int(r[0]) for r in rows]
+
+
 def put_link(
     conn: sqlite3.Connection, model_id: int, other_id: int, relation: str, confidence: float, evidence: dict
 ) -> None:

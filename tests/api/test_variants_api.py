@@ -79,3 +79,36 @@ def test_decision_needs_the_write_token_when_one_is_set(data_dir):
         assert client.post(url, json={"decision": "not_variant"}).status_code == 401
         r = client.post(url, json={"decision": "not_variant"}, headers={"Authorization": f"Bearer {writer}"})
         assert r.status_code == 201
+
+
+def test_search_hits_carry_the_relation_verified_for_the_query(data_dir, corpus):
+    """POST /search with a query that is not stored: a mirrored, moved copy of a stored model gets
+    `relation` and its evidence on that model's hit; a query of another shape gets none."""
+    path, _ = corpus.held_out[0]
+    tm = trimesh.load(path, process=False)
+    mirror = tm.copy()
+    mirror.apply_transform(np.diag([-1.0, 1.0, 1.0, 1.0]))
+    mirror.apply_translation([5.0, 0.0, 0.0])
+    with TestClient(create_app(make_settings(data_dir))) as client:
+        first = _upload(client, path.name, path.read_bytes())
+        a = first.json()["model_id"]
+        assert wait_job(client, first.json()["job_id"])["state"] == "done"
+
+        def hits(data: bytes, name: str):
+            r = client.post("/search", files={"file": (name, data)}, data={"k": "20"})
+            assert r.status_code == 200, r.text
+            rows = {h["model_id"]: h for h in r.json()["data"]}
+            return (rows, r.json()["seconds"]) if a in rows else None
+
+        rows, seconds = wait_for(lambda: hits(mirror.export(file_type="ply"), "mirror.ply"), timeout_s=30)
+        assert rows[a]["relation"] == "mirrored"
+        evidence = rows[a]["evidence"]
+        assert evidence["mirrored"] and evidence["same_triangles"] and evidence["confidence"] == 1.0
+        t = np.asarray(evidence["transform"])  # the query onto the stored model
+        assert np.linalg.det(t[:3, :3]) < 0 and abs(t[0, 3] - 5.0) < 1e-3
+        assert all(h["relation"] is None and h["evidence"] is None for i, h in rows.items() if i != a)
+        assert seconds["variants"] >= 0
+        other, _ = corpus.held_out[1]
+        r = client.post("/search", files={"file": (other.name, other.read_bytes())}, data={"k": "20"})
+        assert r.status_code == 200
+        assert [h["model_id"] for h in r.json()["data"] if h["relation"] is not None] == []

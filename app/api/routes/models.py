@@ -173,13 +173,19 @@ def _header_text(text: str) -> str:
     return "".join(c if 32 <= ord(c) < 127 else "?" for c in text)[:300]
 
 
-def to_response(result: search.SearchResult, relations: dict[int, str] | None = None) -> SearchResponse:
-    """relations: {model id: verified variant relation to the query model}, shown on the hits."""
-    relations = relations or {}
+def to_response(
+    result: search.SearchResult,
+    relations: dict[int, str] | None = None,
+    evidence: dict[int, dict] | None = None,
+) -> SearchResponse:
+    """relations: {model id: verified variant relation to the query model}, shown on the hits;
+    evidence: {model id: the numbers behind it}, where the query was verified just now."""
+    relations, evidence = relations or {}, evidence or {}
     hits = [
         SearchHit(
             model_id=h.model.id, name=h.model.name, label=h.model.label, distance=h.distance, rank=h.rank,
-            forward=h.forward, reverse=h.reverse, partial=h.partial, relation=relations.get(h.model.id),
+            forward=h.forward, reverse=h.reverse, partial=h.partial,
+            relation=relations.get(h.model.id), evidence=evidence.get(h.model.id),
         )
         for h in result.hits
     ]

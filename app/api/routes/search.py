@@ -12,7 +12,7 @@ from app.api.deps import RuntimeDep
 from app.api.routes.models import ERRORS, to_response
 from app.api.schemas import SearchResponse
 from app.api.uploads import multipart_body, read_form
-from app.services import search
+from app.services import search, variant_query
 from app.services.errors import InvalidInputError
 
 router = APIRouter(tags=["search"])
@@ -49,6 +49,7 @@ async def search_mesh(request: Request, runtime: RuntimeDep) -> SearchResponse:
     runtime.live.require()  # fail fast, before the expensive part, when nothing can answer
     seconds = {"upload": time.perf_counter() - t}
     t = time.perf_counter()
+    deadline = time.monotonic() + runtime.describer.timeout_s  # the query pool's, for the variant step
     description, stages = await runtime.describer.describe(data, limits.upload_format(filename))
     describe_wall = time.perf_counter() - t
     runtime.metrics.describe_seconds.labels("query").observe(describe_wall)
@@ -59,5 +60,12 @@ async def search_mesh(request: Request, runtime: RuntimeDep) -> SearchResponse:
         search.search_description, runtime.ctx, runtime.live, description, k, label, PARTIAL[choice]
     )
     seconds.update(result.seconds)
+    t = time.perf_counter()
+    hit_ids = [h.model.id for h in result.hits]
+    found = await variant_query.relations(
+        runtime.ctx, runtime.describer, data, limits.upload_format(filename), hit_ids, deadline
+    )
+    seconds["variants"] = time.perf_counter() - t
     seconds["total"] = sum(v for name, v in seconds.items() if "." not in name)
-    return to_response(search.SearchResult(result.hits, result.vocabulary_id, seconds))
+    relations = {i: e["relation"] for i, e in found.items()}
+    return to_response(search.SearchResult(result.hits, result.vocabulary_id, seconds), relations, found)

@@ -13,6 +13,7 @@ from scipy.spatial import cKDTree
 from app.core.meshdata import Mesh
 from app.core.variants.align import Frame, frame
 from app.core.variants.fingerprint import fingerprint
+from app.core.variants.onesided import mean_edge
 from app.core.variants.surface import closest_on_triangles, objects, sample_surface
 
 N_POINTS = 2048  # samples per surface for alignment and distances
@@ -35,6 +36,10 @@ class Prepared:
     def diagonal(self) -> float:
         v = self.mesh.vertices
         return float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+
+    @cached_property
+    def mean_edge(self) -> float:
+        return mean_edge(self.mesh)
 
     @cached_property
     def samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -18,11 +18,12 @@ Distances are relative to the bounding-box diagonal of `b`. `transform` (4 x 4) 
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
 from app.core.variants.align import Similarity, hypotheses, icp, to_world, umeyama
+from app.core.variants.onesided import lies_on, vertex_subset
 from app.core.variants.prepared import Prepared, face_keys
 
 RELATIONS = ("identical", "moved", "rescaled", "mirrored", "retriangulated", "part_of", "contains", "similar")
@@ -38,6 +39,7 @@ REFINE = 2  # hypotheses refined per handedness
 EXACT_ROUNDS = 4
 EXACT_TOL = 1e-4  # same triangles: every vertex within this fraction of the diagonal of its partner
 MAX_PARTS = 8  # objects of a multi-object mesh verified one by one
+ONE_SIDED_CHAMFER = 0.06  # past this symmetric mean distance the one-sided test is not tried
 
 
 @dataclass(frozen=True)
@@ -53,6 +55,12 @@ class Evidence:
     same_triangles: bool
     transform: list[list[float]]
     copies: int = 1  # for part_of / contains: how many matching objects the larger one holds
+    # one-sided test (onesided.py), when the symmetric one failed: does one mesh lie on the other?
+    lies_on_other: bool | None = None  # True: a lies on b (a is the coarser copy); False: b on a
+    resolution: float | None = None  # the lying mesh's mean edge / diagonal of b
+    slack: float | None = None  # what its tolerances grow with: that edge times its coarsening
+    vertex_gap: float | None = None  # 99 % of its vertices within this of the other surface
+    uncovered: float | None = None  # 90 % of the other surface within this of it
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -73,10 +81,9 @@ def relate(a: Prepared, b: Prepared) -> Evidence:
         if found is not None:
             inverse = np.linalg.inv(np.asarray(found.transform))
             scale = 1.0 / found.scale
-            return Evidence(
-                "contains", found.confidence, found.chamfer, found.hausdorff, found.reverse, found.forward,
-                scale, found.mirrored, found.same_triangles, inverse.tolist(), found.copies,
-            )
+            flipped = None if found.lies_on_other is None else not found.lies_on_other
+            return replace(found, relation="contains", forward=found.reverse, reverse=found.forward,
+                           scale=scale, transform=inverse.tolist(), lies_on_other=flipped)
     return whole
 
 
@@ -160,7 +167,7 @@ def _exact_evidence(b: Prepared, sim: Similarity, residual: float) -> Evidence:
                     True, sim.matrix().tolist())
 
 
-def _evidence(a: Prepared, b: Prepared, sim: Similarity) -> Evidence:
+def _evidence(a: Prepared, b: Prepared, sim: Similarity, one_sided: bool = True) -> Evidence:
     diag = b.diagonal
     ab = b.distance_to(sim.apply(a.samples[0]))  # (N,) a's samples to b's surface
     ba = a.distance_to(_inverse(sim).apply(b.samples[0])) * sim.scale  # (N,) b's samples to a's, b's units
@@ -169,12 +176,23 @@ def _evidence(a: Prepared, b: Prepared, sim: Similarity) -> Evidence:
     forward = float((ab <= COVER_TOLERANCE * diag).mean())
     reverse = float((ba <= COVER_TOLERANCE * diag).mean())
     margin = max(chamfer / CHAMFER_MAX, hausdorff / HAUSDORFF_MAX)
+    extra: dict = {}
+    if one_sided and margin >= 1.0 and chamfer < ONE_SIDED_CHAMFER:  # a coarser copy on the finer surface?
+        inverse = _inverse(sim)
+        on = lies_on(
+            b.distance_to(sim.apply(vertex_subset(a.mesh))) / diag, ba / diag, a.mean_edge * sim.scale / diag,
+            a.distance_to(inverse.apply(vertex_subset(b.mesh))) * sim.scale / diag, ab / diag,
+            b.mean_edge / diag,
+        )
+        extra = {"lies_on_other": on.a_on_b, "resolution": on.resolution, "slack": on.slack,
+                 "vertex_gap": on.vertex_gap, "uncovered": on.uncovered}
+        margin = min(margin, on.margin)
     if margin < 1.0:
         relation, confidence = "retriangulated", 1.0 - 0.5 * margin
     else:
         relation, confidence = "similar", 1.0 - 0.5 / margin
     return Evidence(relation, round(confidence, 4), chamfer, hausdorff, forward, reverse, sim.scale,
-                    sim.mirrored, False, sim.matrix().tolist())
+                    sim.mirrored, False, sim.matrix().tolist(), **extra)
 
 
 def _exact_relation(sim: Similarity, diagonal: float) -> str:
@@ -212,7 +230,7 @@ def _parts_in(small: Prepared, big: Prepared) -> Evidence | None:
             first = Evidence(**{**matches[0].to_dict(), "copies": len(matches)})
     assert first is not None
     # coverage against the whole of `big`, as the whole-surface check measures it
-    whole = _evidence(small, big, Similarity(first.scale, np.asarray(first.transform)[:3, :3] / first.scale,
-                                             np.asarray(first.transform)[:3, 3]))
-    return Evidence("part_of", first.confidence, first.chamfer, first.hausdorff, whole.forward, whole.reverse,
-                    first.scale, first.mirrored, first.same_triangles, first.transform, first.copies)
+    placed = Similarity(first.scale, np.asarray(first.transform)[:3, :3] / first.scale,
+                        np.asarray(first.transform)[:3, 3])
+    whole = _evidence(small, big, placed, one_sided=False)
+    return replace(first, relation="part_of", forward=whole.forward, reverse=whole.reverse)

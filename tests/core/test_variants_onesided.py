@@ -1,0 +1,138 @@
+"""Re-triangulated by one-sided evidence: a coarser copy whose vertices lie on the original surface
+(a decimation, a remesh that dropped a thin part) against shapes of one kind that differ."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from app.core.mesh import Mesh, load_mesh
+from app.core.variants import Prepared, relate
+from app.core.variants.onesided import (
+    COVER_FLOOR,
+    COVER_TOL,
+    FULL_COARSENING,
+    MIN_VERTICES,
+    RESOLUTION_CAP,
+    VERTEX_FLOOR,
+    VERTEX_MAX,
+    VERTEX_MAX_FLOOR,
+    VERTEX_TOL,
+    lies_on,
+    mean_edge,
+    side,
+    slack,
+)
+from tests.conftest import dataset_or_skip
+
+
+def _torus(
+    major: int, minor: int, tube: float = 0.3, spike: bool = False, turn: np.ndarray | None = None
+) -> Mesh:
+    """A tilted torus (vertices on the exact surface whatever the sections); `spike`: a thin rod
+    (radius 0.03, 1.3 % of the area) stuck into its outer side, far out of the ring."""
+    t = trimesh.creation.torus(1.0, tube, major_sections=major, minor_sections=minor)
+    v, f = np.asarray(t.vertices) * [1.0, 1.0, 0.8], np.asarray(t.faces, np.int64)
+    if spike:
+        rod = trimesh.creation.cylinder(radius=0.03, height=0.9, sections=12)
+        rv = np.asarray(rod.vertices)[:, [2, 1, 0]] + [1.55, 0.0, 0.0]
+        v, f = np.vstack([v, rv]), np.vstack([f, np.asarray(rod.faces, np.int64) + len(v)])
+    v[:, 2] += 0.3 * v[:, 0]  # a shear: no symmetry plane, distinct principal axes
+    return Mesh(v if turn is None else v @ turn.T, f)
+
+
+@pytest.fixture(scope="module")
+def fine() -> Prepared:
+    return Prepared(_torus(96, 32, spike=True))
+
+
+def test_slack_grows_with_the_coarsening() -> None:
+    assert slack(0.1, 0.1) == 0.0 and slack(0.1, 0.2) == 0.0  # no coarser: no slack
+    assert slack(0.1, 0.1 / (1 + 0.5 * (FULL_COARSENING - 1))) == pytest.approx(0.05)  # halfway
+    assert slack(0.1, 0.01) == pytest.approx(0.1)  # a decimation to a tenth: the whole edge
+    assert slack(0.5, 0.01) == pytest.approx(RESOLUTION_CAP)  # a few huge triangles buy no more
+
+
+def test_side_by_hand() -> None:
+    """Margins are the gaps over the tolerances: slack-scaled, or the floors when that is smaller."""
+    vertex = np.array([0.0] * 98 + [0.02, 0.03])  # (100,): largest 0.03
+    other = np.linspace(0.0, 0.1, 11)  # 90 % quantile 0.09
+    e, s, gap, uncovered, margin = side(vertex, other, edge=0.5, other_edge=0.05)
+    assert (e, s) == (0.5, pytest.approx(RESOLUTION_CAP))
+    assert gap == pytest.approx(np.quantile(vertex, 0.99)) and uncovered == pytest.approx(0.09)
+    expected = max(gap / (VERTEX_TOL * s), 0.03 / (VERTEX_MAX * s), 0.09 / (COVER_TOL * s))
+    assert margin == pytest.approx(expected)
+    *_, same = side(vertex, other, edge=0.05, other_edge=0.05)  # same resolution: the floors
+    assert same == pytest.approx(max(gap / VERTEX_FLOOR, 0.03 / VERTEX_MAX_FLOOR, 0.09 / COVER_FLOOR))
+    *_, few = side(vertex[:MIN_VERTICES - 1], other, edge=0.5, other_edge=0.05)
+    assert few == float("inf")  # a box's 8 corners lie on anything blocky: too few to say
+    on = lies_on(vertex, other, 0.5, vertex * 10, other * 10, 0.05)  # the b side is ten times worse
+    assert on.a_on_b and on.margin == pytest.approx(margin)
+    assert not lies_on(vertex * 10, other * 10, 0.05, vertex, other, 0.5).a_on_b
+
+
+def test_mean_edge_of_a_unit_square() -> None:
+    corners = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    square = Mesh(corners, np.array([[0, 1, 2], [0, 2, 3]]))
+    assert mean_edge(square) == pytest.approx((4 + 2 * np.sqrt(2)) / 6)
+
+
+@pytest.mark.parametrize("sections", [(16, 8), (12, 6)])
+def test_coarse_copy_that_dropped_a_thin_part_is_retriangulated(fine, random_rotation, sections) -> None:
+    """Its vertices lie on the original; the rod it lost is far out (the symmetric Hausdorff distance
+    fails) but a small part of the area."""
+    coarse = _torus(*sections, turn=random_rotation(6))
+    ev = relate(Prepared(coarse), fine)
+    assert ev.hausdorff > 0.06  # the symmetric test alone says no
+    assert ev.relation == "retriangulated" and ev.lies_on_other is True
+    assert ev.vertex_gap is not None and ev.vertex_gap < 0.02
+    assert ev.resolution is not None and ev.resolution > 0.05
+    assert 0.5 < ev.confidence < 1.0
+    back = relate(fine, Prepared(coarse))  # seen from the original: the other one lies on it
+    assert back.relation == "retriangulated" and back.lies_on_other is False
+
+
+@pytest.mark.parametrize("sections", [(96, 32), (16, 8)])
+def test_same_kind_different_shape_is_only_similar(fine, sections) -> None:
+    """A ring 27 % thinner (with its rod, or coarse without) is not the same surface at any of these
+    resolutions: its vertices are 3-4 % of the diagonal inside the original."""
+    for thin in (_torus(*sections, tube=0.22), _torus(*sections, tube=0.22, spike=True)):
+        ev = relate(Prepared(thin), fine)
+        assert ev.relation == "similar", ev
+        assert ev.vertex_gap is not None and ev.vertex_gap > 0.03
+
+
+@pytest.mark.parametrize("fraction", [0.5, 0.1])
+def test_decimated_shrec_mesh_is_retriangulated(fraction) -> None:
+    from benchmarks.variants_detect_kinds import decimate
+
+    path = sorted((dataset_or_skip("shrec11-simplified") / "hand").rglob("*.obj"))[0]
+    base = load_mesh(path)
+    ev = relate(Prepared(decimate(base, fraction)), Prepared(base))
+    assert ev.relation == "retriangulated"
+
+
+def test_two_poses_of_a_laptop_are_not_variants() -> None:
+    """The closest pair of one SHREC'11 class measured (a laptop opened further): most vertices of one
+    lie on the other, but a tenth of the other surface is more than 0.6 edge lengths away."""
+    root = dataset_or_skip("shrec11-simplified") / "laptop"
+    files = {p.name: p for p in root.rglob("*.obj")}
+    base = sorted(files.values())[0]
+    ev = relate(Prepared(load_mesh(files["T313.obj"])), Prepared(load_mesh(base)))
+    assert ev.relation == "similar"
+
+
+@pytest.mark.parametrize("seeds", [(5, 9), (7, 8), (5, 7)])
+def test_two_coarse_blobs_at_one_resolution_are_only_similar(seeds) -> None:
+    """Convex hulls of 80 random points (about 20 vertices, edges a third of the diagonal): each one's
+    vertices are within 0.3 edge lengths of the other's surface, which a tolerance proportional to the
+    edge alone would accept; neither is coarser than the other, so the floors apply."""
+
+    def hull(seed: int) -> Mesh:
+        tm = trimesh.convex.convex_hull(np.random.default_rng(seed).normal(size=(80, 3)) * [1.0, 0.6, 0.35])
+        return Mesh(np.asarray(tm.vertices), np.asarray(tm.faces, np.int64))
+
+    ev = relate(Prepared(hull(seeds[0])), Prepared(hull(seeds[1])))
+    assert ev.relation == "similar"
+    assert ev.slack is not None and ev.vertex_gap is not None and ev.vertex_gap > 0.015
