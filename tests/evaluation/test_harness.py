@@ -335,9 +335,12 @@ def test_fusion_rows(folder: Path, tmp_path: Path) -> None:
         evaluate(folder, _options(tmp_path / "cache", rows=("run5",), fusion=(-1.0,)))
 
 
-def test_command_passes_the_new_flags(folder: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def _stopped_command(
+    monkeypatch: pytest.MonkeyPatch,
+) -> tuple[argparse.ArgumentParser, list[EvaluationOptions]]:
+    """The `evaluate` command's parser, its evaluation replaced by one that records the options it gets
+    and stops (CommandError "stop here"), and the list it records into."""
     from app.commands import evaluate as command
-    from app.core.keypoints import KeypointFilter
 
     seen: list[EvaluationOptions] = []
 
@@ -348,6 +351,13 @@ def test_command_passes_the_new_flags(folder: Path, tmp_path: Path, monkeypatch:
     monkeypatch.setattr(command, "evaluate", fake)
     parser = argparse.ArgumentParser()
     command.register(parser.add_subparsers())
+    return parser, seen
+
+
+def test_command_passes_the_new_flags(folder: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from app.core.keypoints import KeypointFilter
+
+    parser, seen = _stopped_command(monkeypatch)
     args = parser.parse_args(["evaluate", str(folder), "--queries", str(tmp_path), "--fusion", "0.5, 1",
                               "--filter", "--time-range", "weyl", "--smoothing-weights", "cotangent",
                               "--area-weighted", "--mode", "hard", "--sigma-scale", "0.7"])
@@ -389,18 +399,9 @@ def test_paper_preset_is_the_papers_method(folder: Path, tmp_path: Path) -> None
 
 def test_the_paper_row_runs_only_when_asked(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """It solves at each mesh's own resolution (tens of seconds on a fine scan): not a default."""
-    from app.commands import evaluate as command
     from app.evaluation.results import DEFAULT_ROWS, ROW_NAMES
 
-    seen: list[EvaluationOptions] = []
-
-    def fake(directory: Path, options: EvaluationOptions) -> None:
-        seen.append(options)
-        raise EvaluationError("stop here")
-
-    monkeypatch.setattr(command, "evaluate", fake)
-    parser = argparse.ArgumentParser()
-    command.register(parser.add_subparsers())
+    parser, seen = _stopped_command(monkeypatch)
     for argv in ([], ["--runs", "all"], ["--runs", "run5,paper"]):
         args = parser.parse_args(["evaluate", str(tmp_path), *argv])
         with pytest.raises(CommandError, match="stop here"):
