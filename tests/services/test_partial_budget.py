@@ -1,0 +1,47 @@
+"""The partial scoring's own deadline (app.services.partial.score): past it, candidates stay unscored."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+
+from app.services import partial
+
+
+@pytest.fixture
+def scored(monkeypatch):
+    """score() over 50 candidates with a fake signature store and matcher; returns a runner."""
+    calls: list[int] = []
+    monkeypatch.setattr(partial._CACHE, "get", lambda path: None if path == "no-sig-7" else f"sig-{path}")
+
+    def fake_match(query, models, params):
+        calls.append(len(models))
+        return [f"match-{m}" for m in models]
+
+    monkeypatch.setattr(partial, "match_many", fake_match)
+    ctx = SimpleNamespace(blobs=SimpleNamespace(description_path=lambda i: f"no-sig-{i}" if i == 7 else i))
+
+    def run(budget_s: float) -> tuple[list, list[int]]:
+        monkeypatch.setattr(partial, "SCORE_BUDGET_S", budget_s)
+        calls.clear()
+        return partial.score(ctx, object(), list(range(50))), list(calls)
+
+    return run
+
+
+def test_within_the_budget_every_candidate_with_a_signature_is_scored(scored):
+    out, calls = scored(60.0)
+    assert sum(calls) == 49 and len(calls) == 4  # chunks of 16, one candidate without a signature
+    assert out[7] is None and out[0] == "match-sig-0" and out[49] == "match-sig-49"
+
+
+def test_past_the_deadline_only_the_first_chunk_is_scored_and_in_place(scored):
+    out, calls = scored(0.0)
+    assert calls == [partial.CHUNK - 1]  # the first chunk always runs (candidate 7 has no signature)
+    assert out[: partial.CHUNK] == [None if j == 7 else f"match-sig-{j}" for j in range(partial.CHUNK)]
+    assert out[partial.CHUNK:] == [None] * (50 - partial.CHUNK)
+
+
+def test_a_query_without_a_signature_scores_nothing(scored):
+    assert partial.score(SimpleNamespace(), None, [1, 2]) == [None, None]
