@@ -9,7 +9,7 @@ from importlib.util import find_spec
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, Field, field_validator
+from pydantic import BaseModel, Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from app.core.pipeline import DescribeParams
@@ -32,6 +32,8 @@ class DescribeSettings(BaseModel):
     target_vertices: int = Field(default=DescribeParams.target_vertices, ge=0)
     smoothing: int = Field(default=DescribeParams.smoothing, ge=0)
     antialias: float = Field(default=DescribeParams.antialias, ge=0.0)  # canonical edge lengths; 0: none
+    antialias_start: float = Field(default=DescribeParams.antialias_start, ge=0.0)  # ratio: none up to it
+    antialias_full: float = Field(default=DescribeParams.antialias_full, ge=0.0)  # ratio: full from it
     smoothing_weights: str = DescribeParams.smoothing_weights  # one of app.core.smoothing.WEIGHTS
     time_range: Literal["spectrum", "weyl"] = DescribeParams.time_range  # type: ignore[assignment]
     laplacian: Literal["cotangent", "intrinsic"] = DescribeParams.laplacian  # type: ignore[assignment]
@@ -60,6 +62,13 @@ class DescribeSettings(BaseModel):
         if value not in WEIGHTS:
             raise ValueError(f"must be one of {', '.join(WEIGHTS)}")
         return value
+
+    @model_validator(mode="after")
+    def _ramp_in_order(self) -> DescribeSettings:
+        if self.antialias_start > self.antialias_full:
+            raise ValueError(f"antialias_start ({self.antialias_start}) must not exceed antialias_full "
+                             f"({self.antialias_full})")
+        return self
 
     def params(self) -> DescribeParams:
         return DescribeParams(**self.model_dump())

@@ -38,6 +38,17 @@ def test_unknown_values_are_refused_at_start(monkeypatch, name):
         Settings()
 
 
+def test_the_antialias_ramp_reaches_the_core_and_a_reversed_one_is_refused(monkeypatch):
+    monkeypatch.setenv("SHAPEBAG_DESCRIBE__ANTIALIAS_START", "2")
+    monkeypatch.setenv("SHAPEBAG_DESCRIBE__ANTIALIAS_FULL", "6.5")
+    params = Settings().describe.params()
+    assert (params.antialias_start, params.antialias_full) == (2.0, 6.5)
+    assert params.fingerprint() != DescribeParams().fingerprint()
+    monkeypatch.setenv("SHAPEBAG_DESCRIBE__ANTIALIAS_START", "8")
+    with pytest.raises(pydantic.ValidationError, match="antialias_start"):
+        Settings()
+
+
 def test_encode_defaults_are_the_core_defaults_and_bad_values_are_refused(monkeypatch):
     from app.core.vocabulary import EncodeParams
 

@@ -15,6 +15,16 @@ from app.evaluation.report import format_table, write_json
 from app.evaluation.results import DEFAULT_CACHE, DEFAULT_ROWS, ROW_NAMES, EvaluationError, EvaluationOptions
 
 
+def _ramp(text: str) -> tuple[float, float]:
+    """ "START,FULL" -> (start, full), 0 <= start <= full."""
+    try:
+        start, full = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected START,FULL (two numbers), not {text!r}") from None
+    if not 0.0 <= start <= full:
+        raise argparse.ArgumentTypeError(f"expected 0 <= START <= FULL, not {text!r}")
+    return start, full
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "evaluate",
@@ -65,6 +75,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--antialias", type=float, default=EvaluationOptions.antialias, metavar="L",
                    help="before decimation, a low-pass at the input's resolution over L canonical edge "
                    "lengths (0: none; default %(default)s)")
+    p.add_argument("--antialias-ramp", type=_ramp, default=EvaluationOptions.antialias_ramp,
+                   metavar="START,FULL", help="the low-pass ramps with the decimation ratio: none up to "
+                   "START x, full from FULL x (default %(default)s)")
     p.add_argument("--smoothing-weights", choices=WEIGHTS, default=EvaluationOptions.smoothing_weights,
                    help="Taubin weights: intrinsic (intrinsic Delaunay cotangent), cotangent (extrinsic, "
                    "clipped at 0), area (faces on each edge), capped-area (the same, each face at most the "
@@ -135,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         time_range=args.time_range,
         smoothing=args.smoothing,
         smoothing_weights=args.smoothing_weights, smoothing_target=args.smoothing_target,
-        antialias=args.antialias,
+        antialias=args.antialias, antialias_ramp=args.antialias_ramp,
 
         fill_holes=args.fill_holes,
         laplacian=args.laplacian,

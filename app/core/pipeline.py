@@ -65,6 +65,11 @@ class DescribeParams:
     # into it: with it, full-resolution columns gain clean and under noise at once (docs/results.md,
     # "Full-resolution columns"); 0: none. Meshes that are subdivided (SHREC'11) never see it
     antialias: float = 0.5
+    # its strength ramps with the decimation ratio n_input / target: none up to antialias_start x,
+    # full from antialias_full x on. Mild decimations alias little, and there the low-pass only rounds
+    # the shape against a collection described without it (docs/results.md, "Full-resolution columns")
+    antialias_start: float = 4.0
+    antialias_full: float = 12.0
     # intrinsic (cotangent weights of the intrinsic Delaunay triangulation: the same operator on a
     # Delaunay mesh, far less dependent on the triangulation elsewhere) | cotangent (the paper's)
     laplacian: str = "intrinsic"
@@ -91,6 +96,9 @@ class DescribeParams:
             raise ValueError(f"laplacian must be one of {', '.join(LAPLACIANS)}, not {self.laplacian!r}")
         if not self.antialias >= 0.0:
             raise ValueError(f"antialias must be >= 0, not {self.antialias!r}")
+        if not 0.0 <= self.antialias_start <= self.antialias_full:
+            raise ValueError(f"the antialias ramp needs 0 <= start <= full, not "
+                             f"{self.antialias_start!r} .. {self.antialias_full!r}")
         if not self.smoothing_target >= 0.0:
             raise ValueError(f"smoothing_target must be >= 0, not {self.smoothing_target!r}")
         if not 0.0 <= self.fill_holes < 1.0:
@@ -106,6 +114,8 @@ class DescribeParams:
         for option in ("smoothing_target", "antialias"):  # off: descriptions named as before the option
             if not d[option]:
                 del d[option]
+        if "antialias" not in d:  # no low-pass: its ramp changes nothing
+            del d["antialias_start"], d["antialias_full"]
         parts = [f"{k}={v}" for k, v in sorted(d.items()) if k != "solver"]
         parts += [f"kf.{k}={v}" for k, v in sorted(f.items())]
         return ";".join(parts)
@@ -198,7 +208,8 @@ def canonical_with_rim(mesh: Mesh, params: DescribeParams) -> tuple[Mesh, np.nda
     resolution, closed or not, and the centres of the caps that closed one (heat reflected there
     before the cap, and a cap is not the surface that was there)."""
     fine = to_resolution(mesh, params.target_vertices, subdivision=params.subdivision,
-                         prefilter_length=params.antialias)
+                         prefilter_length=params.antialias,
+                         prefilter_ramp=(params.antialias_start, params.antialias_full))
     closed = fill_holes(fine, params.fill_holes)[0]
     return closed, _rim_mask(fine.faces, len(fine.vertices), len(closed.vertices))
 

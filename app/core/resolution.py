@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from app.core.antialias import prefilter
+from app.core.antialias import prefilter, ramp_length
 from app.core.cleaning import nonmanifold_faces
 from app.core.decimation import cluster, face_normals, quadric
 from app.core.mesh import InvalidMeshError, Mesh, clean
@@ -31,7 +31,7 @@ SUBDIVISIONS = ("midpoint", "loop")
 
 def to_resolution(
     mesh: Mesh, target_vertices: int, tolerance: float = 1.5, subdivision: str = "midpoint",
-    prefilter_length: float = 0.0,
+    prefilter_length: float = 0.0, prefilter_ramp: tuple[float, float] = (0.0, 0.0),
 ) -> Mesh:
     """Canonical resolution policy: bring the vertex count within [target/tol, target*tol].
 
@@ -59,7 +59,7 @@ def to_resolution(
             v, f = trimesh.remesh.subdivide(out.vertices, out.faces)
         out = Mesh(np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64))
     if out.n_vertices > target_vertices * tolerance:
-        out = simplify(out, target_vertices, tolerance, prefilter_length)
+        out = simplify(out, target_vertices, tolerance, prefilter_length, prefilter_ramp)
     return out
 
 
@@ -87,7 +87,10 @@ PRECLUSTER_TO = 30
 REGRID_TO = 3
 
 
-def simplify(mesh: Mesh, target_vertices: int, tolerance: float = 1.5, prefilter_length: float = 0.0) -> Mesh:
+def simplify(
+    mesh: Mesh, target_vertices: int, tolerance: float = 1.5, prefilter_length: float = 0.0,
+    prefilter_ramp: tuple[float, float] = (0.0, 0.0),
+) -> Mesh:
     """Decimate to at most `tolerance` x `target_vertices` vertices, whatever the topology.
 
     The chain: (huge inputs) vertex clustering to PRECLUSTER_TO x target; quadric edge collapse,
@@ -104,8 +107,10 @@ def simplify(mesh: Mesh, target_vertices: int, tolerance: float = 1.5, prefilter
     try:
         if unit.n_vertices > PRECLUSTER_ABOVE * target_vertices:
             unit = _unfolded(clean(cluster(unit, PRECLUSTER_TO * target_vertices)))
-        # the low-pass after the clustering: its cost grows with the vertex count and the ratio
-        unit = prefilter(unit, target_vertices, prefilter_length)
+        # the low-pass after the clustering: its cost grows with the vertex count and the ratio; its
+        # ramp reads the input's own ratio (clustering to 30x is far above any ramp's end)
+        ratio = mesh.n_vertices / target_vertices
+        unit = prefilter(unit, target_vertices, ramp_length(prefilter_length, ratio, prefilter_ramp))
         work = _collapse(unit, target_vertices)
     except InvalidMeshError:  # cleaning refused what edge collapse left (pieces, slivers)
         work = None

@@ -63,6 +63,7 @@ def build_rows(options: EvaluationOptions) -> list[Row]:
             k=options.k, target_vertices=options.target_vertices, time_range=options.time_range,
             smoothing=options.smoothing, smoothing_target=options.smoothing_target,
             antialias=options.antialias,
+            antialias_start=options.antialias_ramp[0], antialias_full=options.antialias_ramp[1],
             smoothing_weights=options.smoothing_weights, laplacian=options.laplacian, remesh=options.remesh,
             subdivision=options.subdivision, fill_holes=options.fill_holes, keypoint_filter=flt,
         )

@@ -47,6 +47,7 @@ class EvaluationOptions:
     smoothing_weights: str = DescribeParams.smoothing_weights  # one of smoothing.WEIGHTS
     smoothing_target: float = DescribeParams.smoothing_target  # > 0: adaptive, to this roughness
     antialias: float = DescribeParams.antialias  # > 0: low-pass before decimation, canonical edges
+    antialias_ramp: tuple[float, float] = (DescribeParams.antialias_start, DescribeParams.antialias_full)
     fill_holes: float = DescribeParams.fill_holes  # largest cap closed, fraction of the area
     laplacian: str = DescribeParams.laplacian  # cotangent | intrinsic (intrinsic Delaunay)
     remesh: bool = DescribeParams.remesh  # isotropic remeshing at the canonical resolution

@@ -7,7 +7,7 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from app.core.antialias import prefilter
+from app.core.antialias import prefilter, ramp_length
 from app.core.mesh import Mesh
 
 
@@ -94,7 +94,9 @@ def test_a_vertex_without_a_face_of_area_keeps_its_place():
 def test_the_describe_filters_only_meshes_it_decimates():
     from app.core.pipeline import DescribeParams, canonical_mesh
 
-    on, off = DescribeParams(antialias=0.5), DescribeParams(antialias=0.0)
+    # the full strength at every ratio (the default ramp is tested below)
+    on = DescribeParams(antialias=0.5, antialias_start=1.0, antialias_full=1.0)
+    off = DescribeParams(antialias=0.0)
     # 242 vertices, about a SHREC'11 mesh: subdivided once into the band, never filtered
     coarse = trimesh.creation.uv_sphere(count=[12, 12])
     coarse = Mesh(np.asarray(coarse.vertices, np.float64), np.asarray(coarse.faces, np.int64))
@@ -109,3 +111,36 @@ def test_the_describe_filters_only_meshes_it_decimates():
 
     # the noise that survives decimation into the canonical mesh is what the filter removed first
     assert radial_spread(canonical_mesh(noisy, on)) < 0.6 * radial_spread(canonical_mesh(noisy, off))
+
+
+@pytest.mark.parametrize("ratio, expected", [(1.5, 0.0), (4.0, 0.0), (6.0, 0.125), (10.0, 0.375), (12.0, 0.5),
+                                             (40.0, 0.5)])
+def test_the_length_ramps_linearly_with_the_decimation_ratio(ratio, expected):
+    assert ramp_length(0.5, ratio, (4.0, 12.0)) == pytest.approx(expected)
+
+
+def test_an_empty_ramp_is_a_step():
+    assert ramp_length(0.5, 7.9, (8.0, 8.0)) == 0.0
+    assert ramp_length(0.5, 8.0, (8.0, 8.0)) == 0.5
+
+
+def test_prefilter_ramps_by_its_own_ratio():
+    sphere = _sphere(5)  # 10,242 vertices to 1,000: ratio 10.242, 0.75 of the way from 4 to 12
+    ramped = prefilter(sphere, 1000, 0.5, ramp=(4.0, 12.0))
+    np.testing.assert_allclose(ramped.vertices, prefilter(sphere, 1000, 0.5 * 6.242 / 8).vertices, atol=1e-9)
+    assert prefilter(sphere, 1000, 0.5, ramp=(11.0, 12.0)) is sphere
+
+
+def test_the_default_ramp_leaves_mild_decimations_alone_and_filters_scans():
+    from app.core.pipeline import DescribeParams, canonical_mesh
+
+    on, off = DescribeParams(), DescribeParams(antialias=0.0)
+    assert (on.antialias_start, on.antialias_full) == (4.0, 12.0) and on.antialias > 0
+    mild = _sphere(4)  # 2,562 vertices: 2.6x, like a re-triangulated SHREC'11 copy or a 3,000-vertex shape
+    np.testing.assert_array_equal(canonical_mesh(mild, on).vertices, canonical_mesh(mild, off).vertices)
+    scan = _sphere(6)  # 40,962 vertices: 41x, a scan
+    rng = np.random.default_rng(2)
+    noisy = Mesh(scan.vertices + rng.normal(0, 0.002, scan.vertices.shape), scan.faces)
+    spread = {name: float(np.linalg.norm(canonical_mesh(noisy, p).vertices, axis=1).std())
+              for name, p in (("on", on), ("off", off))}
+    assert spread["on"] < 0.6 * spread["off"]

@@ -117,6 +117,12 @@ def test_fingerprint_names_every_parameter_that_changes_the_description():
     assert a.fingerprint() != DescribeParams(smoothing_weights="cotangent").fingerprint()
     assert a.fingerprint() != DescribeParams(time_range="weyl").fingerprint()
     assert a.fingerprint() != DescribeParams(fill_holes=0.0).fingerprint()
+    assert a.fingerprint() != DescribeParams(antialias_start=2.0).fingerprint()
+    assert a.fingerprint() != DescribeParams(antialias_full=20.0).fingerprint()
+    # without the low-pass its ramp changes nothing, and the name is the one from before the option
+    off = DescribeParams(antialias=0.0).fingerprint()
+    assert off == DescribeParams(antialias=0.0, antialias_start=1.0, antialias_full=2.0).fingerprint()
+    assert "antialias" not in off
     other_laplacian = "cotangent" if a.laplacian == "intrinsic" else "intrinsic"
     assert a.fingerprint() != DescribeParams(laplacian=other_laplacian).fingerprint()
     assert a.fingerprint() != DescribeParams(remesh=not a.remesh).fingerprint()

@@ -381,6 +381,14 @@ def test_command_passes_the_new_flags(folder: Path, tmp_path: Path, monkeypatch:
     bad = parser.parse_args(["evaluate", str(folder), "--fusion", "heavy"])
     with pytest.raises(CommandError, match="--fusion"):
         bad.func(bad)
+    ramped = parser.parse_args(["evaluate", str(folder), "--antialias", "0.7", "--antialias-ramp", "2,6"])
+    with pytest.raises(CommandError):
+        ramped.func(ramped)
+    assert (seen[3].antialias, seen[3].antialias_ramp) == (0.7, (2.0, 6.0))
+    assert seen[2].antialias_ramp == (4.0, 12.0)  # DescribeParams' ramp by default
+    for wrong in ("6,2", "4", "a,b"):
+        with pytest.raises(SystemExit):
+            parser.parse_args(["evaluate", str(folder), "--antialias-ramp", wrong])
 
 
 def test_paper_preset_is_the_papers_method(folder: Path, tmp_path: Path) -> None:
