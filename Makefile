@@ -96,9 +96,10 @@ evaluate: install  ## Table 2 on SHREC'11 (SHAPEBAG_DATASETS or DATASET=folder-w
 PINNED := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 PYTHONHASHSEED=0
 
 vocabulary: install  ## refit the shipped app/data/vocabulary/default (synthetic corpus VOCAB_CLASSES x VOCAB_PER_CLASS, seed 0)
-	rm -rf var/corpus-vocab var/vocabulary-default
+	rm -rf var/corpus-vocab var/corpus-vocab-fine var/vocabulary-default
 	$(PINNED) $(BIN)/python -c "from app.datasets.synthetic import generate; generate('var/corpus-vocab', classes=$(VOCAB_CLASSES), per_class=$(VOCAB_PER_CLASS), seed=0)"
-	$(PINNED) $(BIN)/shapebag vocabulary fit var/corpus-vocab --out var/vocabulary-default --size 64 --run run5 --seed 0
+	$(PINNED) $(BIN)/python -c "from app.datasets.synthetic import refine; refine('var/corpus-vocab', 'var/corpus-vocab-fine', min_vertices=12000)"
+	$(PINNED) $(BIN)/shapebag vocabulary fit var/corpus-vocab var/corpus-vocab-fine --out var/vocabulary-default --size 64 --run run5 --seed 0
 	@echo "compare with $(SHIPPED_VOCAB), then: rm -rf $(SHIPPED_VOCAB) && mv var/vocabulary-default $(SHIPPED_VOCAB)"
 
 bench: install  ## short benchmark suite on SHREC'11 (prints tables, writes results/*.json)

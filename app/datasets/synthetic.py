@@ -172,6 +172,27 @@ def _unit(x: np.ndarray) -> np.ndarray:
     return x / np.linalg.norm(x)
 
 
+def refine(src_dir: Path | str, out_dir: Path | str, min_vertices: int) -> Path:
+    """Copy a labelled folder of OBJ meshes to out_dir, each mesh midpoint-subdivided until it has at
+    least `min_vertices` vertices: the same surfaces (every new vertex is an edge midpoint) at a scan's
+    resolution. The shipped vocabulary's recipe describes its corpus at both ends of the low-pass ramp
+    (DescribeParams.antialias_start/full): as generated, and refined past the ramp's end."""
+    import trimesh
+
+    src, out = Path(src_dir), Path(out_dir)
+    labels = (src / "labels.csv").read_text()
+    for rel in [line.split(",")[0] for line in labels.splitlines()[1:] if line]:
+        mesh = trimesh.load(src / rel, force="mesh", process=False)
+        vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+        while len(vertices) < min_vertices:
+            vertices, faces = trimesh.remesh.subdivide(vertices, faces)
+        (out / rel).parent.mkdir(parents=True, exist_ok=True)
+        text = trimesh.exchange.obj.export_obj(trimesh.Trimesh(vertices, faces, process=False))
+        _atomic_write(out / rel, text)
+    _atomic_write(out / "labels.csv", labels)  # last: a folder with labels.csv is complete
+    return out
+
+
 def _write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
     lines = [f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in vertices]
     lines += [f"f {a} {b} {c}\n" for a, b, c in faces + 1]

@@ -25,12 +25,19 @@ from app.core import metrics
 from app.core.pipeline import ShapeDescription
 from app.core.vocabulary import EncodeParams, Vocabulary
 from app.datasets.folder import read_labelled_folder
-from app.datasets.synthetic import generate
+from app.datasets.synthetic import generate, refine
 
 MAKEFILE = Path(__file__).resolve().parents[2] / "Makefile"
 COUNT_REL = 0.015  # pooled keypoints: last-bit noise moved them by 0.35 %
 DNA_REL = 0.005  # Shape-DNA scale (median pairwise L1 of 30 eigenvalues): noise moved it by 0.07 %
 MAP_POINTS = 0.006  # mAP, pure and fused: the seed spread above is 0.3 points either side
+
+
+def _refine_min_vertices() -> int:
+    """The min_vertices `make vocabulary` refines its corpus to."""
+    found = re.search(r"refine\([^)]*min_vertices=(\d+)\)", MAKEFILE.read_text())
+    assert found, f"the vocabulary recipe in {MAKEFILE} no longer refines its corpus"
+    return int(found.group(1))
 
 
 def _make_variable(name: str) -> int:
@@ -55,6 +62,7 @@ def test_make_vocabulary_reproduces_the_shipped_vocabulary(tmp_path, monkeypatch
     corpus, refit_dir = tmp_path / "corpus-vocab", tmp_path / "vocabulary-default"
     generate(corpus, classes=_make_variable("VOCAB_CLASSES"), per_class=_make_variable("VOCAB_PER_CLASS"),
              seed=0)
+    fine = refine(corpus, tmp_path / "corpus-vocab-fine", min_vertices=_refine_min_vertices())
     seen: list[list[ShapeDescription]] = []  # the descriptions the command fits on, to score both with
     fit = Vocabulary.fit.__func__  # type: ignore[attr-defined]
 
@@ -64,8 +72,9 @@ def test_make_vocabulary_reproduces_the_shipped_vocabulary(tmp_path, monkeypatch
 
     monkeypatch.setattr(Vocabulary, "fit", classmethod(recording_fit))
     # the recipe's own command, as `make vocabulary` runs it (describe pool, k-means, fusion scales)
-    assert main(["vocabulary", "fit", str(corpus), "--out", str(refit_dir), "--size", str(shipped.size),
-                 "--run", shipped.run, "--seed", str(shipped.metadata["seed"]), "--processes", "2"]) == 0
+    assert main(["vocabulary", "fit", str(corpus), str(fine), "--out", str(refit_dir),
+                 "--size", str(shipped.size), "--run", shipped.run, "--seed", str(shipped.metadata["seed"]),
+                 "--processes", "2"]) == 0
     refit = Vocabulary.load(str(refit_dir))
     hint = "the describe code moved the descriptors: refit with `make vocabulary`"
     assert refit.metadata["describe"] == shipped.metadata["describe"], hint
@@ -75,7 +84,7 @@ def test_make_vocabulary_reproduces_the_shipped_vocabulary(tmp_path, monkeypatch
     assert refit.fusion.dna == pytest.approx(shipped.fusion.dna, rel=DNA_REL), hint
 
     (descriptions,) = seen
-    labels = np.array([item.label for item in read_labelled_folder(corpus)])
+    labels = np.array([item.label for folder in (corpus, fine) for item in read_labelled_folder(folder)])
     assert len(descriptions) == len(labels)
     for fused in (False, True):
         got, fresh = _map(shipped, descriptions, labels, fused), _map(refit, descriptions, labels, fused)

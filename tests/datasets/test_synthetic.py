@@ -13,7 +13,7 @@ import trimesh
 from app.core.mesh import load_mesh
 from app.datasets.bodyplans import PLANS
 from app.datasets.folder import read_labelled_folder
-from app.datasets.synthetic import MAX_VERTICES, generate, make_shape
+from app.datasets.synthetic import MAX_VERTICES, generate, make_shape, refine
 
 
 def _digest(root: Path) -> dict[str, str]:
@@ -70,3 +70,18 @@ def test_bad_arguments(tmp_path: Path, classes: int, per_class: int) -> None:
     with pytest.raises(ValueError):
         generate(tmp_path, classes=classes, per_class=per_class)
     assert not (tmp_path / "labels.csv").exists()
+
+
+def test_refine_keeps_each_surface_and_its_label_at_a_finer_resolution(corpus: Path, tmp_path: Path) -> None:
+    fine = refine(corpus, tmp_path / "fine", min_vertices=12_000)
+    assert [(r.path.relative_to(fine), r.label) for r in read_labelled_folder(fine)] == [
+        (r.path.relative_to(corpus), r.label) for r in read_labelled_folder(corpus)]
+    for row in read_labelled_folder(corpus):
+        before = trimesh.load(row.path, force="mesh", process=False)
+        after = trimesh.load(fine / row.path.relative_to(corpus), force="mesh", process=False)
+        assert len(before.vertices) < 12_000 <= len(after.vertices) < 4 * 12_000
+        # every new vertex is an edge midpoint: the same surface, so the same area and volume
+        assert after.area == pytest.approx(before.area, rel=1e-6)
+        assert after.volume == pytest.approx(before.volume, rel=1e-6)
+        np.testing.assert_allclose(after.bounds, before.bounds, atol=1e-6)
+    assert _digest(refine(corpus, tmp_path / "again", min_vertices=12_000)) == _digest(fine)  # deterministic
