@@ -81,3 +81,12 @@ def queue_refit_if_due(ctx: ServiceContext) -> int | None:
     log.info("%d models ready (refit due at %d): queued vocabulary refit job %d on the collection",
              ready, due, job_id)
     return job_id
+
+
+def refit_status(ctx: ServiceContext) -> tuple[int, int | None]:
+    """(ready models now, ready models at which the next refit is due; None: refits are off)."""
+    with ctx.db.read() as conn:
+        ready = models_repo.count_by_status(conn)["ready"]
+        active = vocab_repo.active(conn)
+        last = jobs_repo.latest(conn, KIND)
+    return ready, refit_due_at(ctx.settings.vocabulary_refit_at, fitted_on(active), failed_at(last))

@@ -8,6 +8,7 @@ import threading
 
 import pytest
 
+from app.cli import main
 from app.core.vocabulary import Vocabulary
 from app.services import catalog, ingestion, refit, search
 from app.services import vocabularies as vocab_service
@@ -201,3 +202,14 @@ def test_searches_answer_from_the_old_pair_during_a_refit_then_from_the_new(data
     assert result.vocabulary_id == new and len(result.hits) == 3
     with ctx.db.read() as conn:  # every model encoded with the new version
         assert vocab_repo.ready_without_vector(conn, new) == []
+
+
+def test_vocabulary_show_says_when_the_next_refit_is_due(data_dir, capsys, monkeypatch):
+    assert main(["vocabulary", "show", "--data-dir", str(data_dir)]) == 0
+    assert "refit on the collection: off" in capsys.readouterr().out
+    monkeypatch.setenv("SHAPEBAG_VOCABULARY_REFIT_AT", "4")
+    assert main(["vocabulary", "show", "--data-dir", str(data_dir)]) == 0
+    assert "next at 24 ready models (12 now)" in capsys.readouterr().out  # the active one fit on 12
+    _activate_a_foreign_vocabulary(open_context(make_settings(data_dir)))
+    assert main(["vocabulary", "show", "--data-dir", str(data_dir)]) == 0
+    assert "next at 4 ready models (12 now)" in capsys.readouterr().out
