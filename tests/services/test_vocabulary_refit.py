@@ -7,9 +7,11 @@ from __future__ import annotations
 import threading
 
 import pytest
+from fastapi.testclient import TestClient
 
 from app.cli import main
 from app.core.vocabulary import Vocabulary
+from app.main import create_app
 from app.services import catalog, ingestion, refit, search
 from app.services import vocabularies as vocab_service
 from app.services.context import ServiceContext, open_context
@@ -213,3 +215,12 @@ def test_vocabulary_show_says_when_the_next_refit_is_due(data_dir, capsys, monke
     _activate_a_foreign_vocabulary(open_context(make_settings(data_dir)))
     assert main(["vocabulary", "show", "--data-dir", str(data_dir)]) == 0
     assert "next at 4 ready models (12 now)" in capsys.readouterr().out
+
+
+def test_the_admin_vocabulary_route_says_when_the_next_refit_is_due(data_dir):
+    token = {"X-Admin-Token": "test-token-kkkkkkkkkkkkkkkkkkkkk"}
+    with TestClient(create_app(make_settings(data_dir, workers=0))) as client:
+        assert client.get("/admin/vocabulary", headers=token).json()["next_refit_at"] is None  # off
+    with TestClient(create_app(make_settings(data_dir, workers=0, vocabulary_refit_at=10))) as client:
+        info = client.get("/admin/vocabulary", headers=token).json()
+        assert info["next_refit_at"] == 24 and info["metadata"]["collection_models"] == 12
