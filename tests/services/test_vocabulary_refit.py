@@ -224,3 +224,18 @@ def test_the_admin_vocabulary_route_says_when_the_next_refit_is_due(data_dir):
     with TestClient(create_app(make_settings(data_dir, workers=0, vocabulary_refit_at=10))) as client:
         info = client.get("/admin/vocabulary", headers=token).json()
         assert info["next_refit_at"] == 24 and info["metadata"]["collection_models"] == 12
+
+
+def test_a_refit_with_descriptions_missing_counts_the_whole_collection(data_dir):
+    """Fit on 5 of 12 descriptions, it still records 12 models: the next refit waits for 24, it is not
+    queued again at once (2 × 5 < 12) after every ingest."""
+    ctx = open_context(make_settings(data_dir, vocabulary_refit_at=4))
+    _activate_a_foreign_vocabulary(ctx)
+    with ctx.db.read() as conn:
+        ids = models_repo.ready_ids(conn)
+    for mid in ids[5:]:
+        ctx.blobs.description_path(mid).unlink()
+    job_id = refit.queue_refit_if_due(ctx)
+    assert job_id is not None and Worker(ctx, "w").run_once().id == job_id  # type: ignore[union-attr]
+    assert _active(ctx).metadata["collection_models"] == 12
+    assert refit.queue_refit_if_due(ctx) is None and refit.refit_status(ctx) == (12, 24)
