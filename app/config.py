@@ -144,6 +144,9 @@ class Settings(BaseSettings):
     vocabulary_size: int = 64
     vocabulary_run: str = "run5"
     auto_vocabulary_min_models: int = 16  # with no vocabulary, fit one once this many models are ready
+    # refit the vocabulary on the collection at this many ready models, and again at each doubling since
+    # the last fit (services/refit.py); 0: never (measured: it does not help at the defaults, docs/results.md)
+    vocabulary_refit_at: int = Field(default=0, ge=0)
     default_vocabulary: Path | None = SHIPPED_VOCABULARY
     describe: DescribeSettings = Field(default_factory=DescribeSettings)
     encode: EncodeSettings = Field(default_factory=EncodeSettings)

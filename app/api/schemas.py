@@ -244,6 +244,9 @@ class VocabularyPublic(BaseModel):
     indexed_models: int = 0
     versions: int = 0
     metadata: dict[str, Any] = Field(default_factory=dict)
+    # the background refit on the collection (SHAPEBAG_VOCABULARY_REFIT_AT): ready models at which the
+    # next is due; null when refits are off
+    next_refit_at: int | None = None
 
 
 class Health(BaseModel):

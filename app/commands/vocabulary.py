@@ -156,6 +156,7 @@ def run_rebuild(args: argparse.Namespace) -> int:
 
 def run_show(args: argparse.Namespace) -> int:
     from app.services.context import open_context
+    from app.services.refit import refit_status
     from app.storage import vocabularies as vocab_repo
 
     ctx = open_context(settings_from(args, must_exist=True))
@@ -172,4 +173,9 @@ def run_show(args: argparse.Namespace) -> int:
             f"{mark} v{v.id}: {v.size} words{fused}, {v.run}, trained on {v.trained_on} descriptors, "
             f"created {v.created_at}, {v.path}"
         )
+    ready, due = refit_status(ctx)
+    if due is None:
+        print("refit on the collection: off (SHAPEBAG_VOCABULARY_REFIT_AT=0)")
+    else:
+        print(f"refit on the collection: next at {due} ready models ({ready} now)")
     return 0

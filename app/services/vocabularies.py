@@ -108,8 +108,12 @@ def inside_data_dir(ctx: ServiceContext, relative: str) -> Path:
     return path
 
 
-def register(ctx: ServiceContext, vocab: Vocabulary, activate: bool) -> int:
-    """Save `vocab` as a new version (files first, then the row); returns its id."""
+def register(ctx: ServiceContext, vocab: Vocabulary, activate: bool, collection_models: int = 0) -> int:
+    """Save `vocab` as a new version (files first, then the row); returns its id.
+
+    collection_models: how many ready models the collection held when it was fit on it (0: fit
+    elsewhere, such as the shipped one); the background refit (services/refit.py) counts the
+    collection's doublings from it."""
     with ctx.db.write() as conn:
         vid = vocab_repo.insert(
             conn,
@@ -118,7 +122,10 @@ def register(ctx: ServiceContext, vocab: Vocabulary, activate: bool) -> int:
             size=vocab.size,
             run=vocab.run,
             # how every vector of this version will be encoded (version_params reads it back)
-            metadata=dict(vocab.describe_meta(), vectors_encoding=ctx.settings.encode.params().encoding()),
+            metadata=dict(
+                vocab.describe_meta(), vectors_encoding=ctx.settings.encode.params().encoding(),
+                **({"collection_models": collection_models} if collection_models else {}),
+            ),
             created_at=vocab.metadata.get("created_at"),
         )
         directory = ctx.vocabulary_dir(vid)
@@ -202,6 +209,7 @@ def rebuild_vocabulary(
     weight = DEFAULT_WEIGHT if weight is None else float(weight)
     with ctx.db.read() as conn:
         ids = models_repo.ready_ids(conn)
+    collection = len(ids)  # the refit's doublings count from this, even if some descriptions are missing
     ids, descs = load_descriptions(ctx, ids)
     if not descs:
         raise InvalidInputError("no ready models to fit a vocabulary on: ingest some first")
@@ -212,7 +220,7 @@ def rebuild_vocabulary(
     timings["fit"] = time.perf_counter() - t
     keep_alive()
     t = time.perf_counter()
-    vid = register(ctx, vocab, activate=False)
+    vid = register(ctx, vocab, activate=False, collection_models=collection)
     params = ctx.settings.encode.params()  # what register() recorded as the new version's encoding
     vectors = encode_all(vocab, descs, params)
     index = new_index(ctx.settings.index_backend, vocab.dimension(params))

@@ -192,6 +192,12 @@ def pending(conn: sqlite3.Connection, kind: str) -> JobRecord | None:
     return _record(row)
 
 
+def latest(conn: sqlite3.Connection, kind: str) -> JobRecord | None:
+    """The newest job of `kind`, whatever its state (None when there was none)."""
+    row = conn.execute("SELECT * FROM jobs WHERE kind = ? ORDER BY id DESC LIMIT 1", (kind,)).fetchone()
+    return _record(row)
+
+
 def heartbeat(db: Database, worker: str, pid: int) -> None:
     with db.queue() as conn:
         conn.execute(

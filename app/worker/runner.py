@@ -11,7 +11,7 @@ import traceback
 from collections.abc import Callable
 
 from app.core.mesh import InvalidMeshError
-from app.services import ingestion, vocabularies
+from app.services import ingestion, refit, vocabularies
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError
 from app.storage import jobs as jobs_repo
@@ -71,6 +71,9 @@ class Worker:
                     jobs_repo.release_for_retry(conn, job.id, reason)
             else:
                 self._fail(job, f"gave up after {job.attempts} attempts: {reason}")
+        else:
+            if job.kind == "ingest":  # one more model: the collection may now call for its own vocabulary
+                self._queue_refit()
         finally:
             stop.set()
             keeper.join()
@@ -83,6 +86,14 @@ class Worker:
         hard = (lambda: self._fail(job, self._overrun(job))) if self.hard_deadline else None
         with wall_clock_limit(self.ctx.settings.ingest_timeout_s, on_hard=hard):
             self._handlers[job.kind](job, lambda: None)
+
+    def _queue_refit(self) -> None:
+        """Queue a refit of the vocabulary on the collection if one is due (services/refit.py); a failed
+        check is logged and never fails the job that ran before it."""
+        try:
+            refit.queue_refit_if_due(self.ctx)
+        except Exception:
+            log.exception("could not check whether a vocabulary refit is due")
 
     def _overrun(self, job: JobRecord) -> str:
         limit = self.ctx.settings.ingest_timeout_s
@@ -114,6 +125,7 @@ class Worker:
         stop = stop or threading.Event()
         done = 0
         last_beat = 0.0
+        self._queue_refit()  # a collection already past the threshold when refits were turned on
         while not stop.is_set():
             if time.monotonic() - last_beat > 2.0:
                 jobs_repo.heartbeat(self.ctx.db, self.name, os.getpid())

@@ -10,7 +10,7 @@ from app.api.deps import AdminDep, CtxDep, RuntimeDep
 from app.api.schemas import ErrorResponse, JobAccepted, VocabularyPublic, VocabularyRebuild
 from app.api.space import RoomDep
 from app.core.descriptor import RUNS
-from app.services import maintenance
+from app.services import maintenance, refit
 from app.services.errors import InvalidInputError
 
 router = APIRouter(prefix="/admin", tags=["admin"], responses={401: {"model": ErrorResponse}})
@@ -50,8 +50,9 @@ def rebuild_index(_: AdminDep, __: RoomDep, ctx: CtxDep) -> JobAccepted:
 def get_vocabulary(_: AdminDep, runtime: RuntimeDep) -> VocabularyPublic:
     active, versions = maintenance.vocabulary_versions(runtime.ctx)
     live = runtime.live.status()
+    next_refit_at = refit.refit_status(runtime.ctx)[1]
     if active is None:
-        return VocabularyPublic(versions=versions)
+        return VocabularyPublic(versions=versions, next_refit_at=next_refit_at)
     return VocabularyPublic(
         id=active.id,
         words=active.size,
@@ -61,4 +62,5 @@ def get_vocabulary(_: AdminDep, runtime: RuntimeDep) -> VocabularyPublic:
         indexed_models=live["indexed"] if live["vocabulary_id"] == active.id else 0,
         versions=versions,
         metadata=active.metadata,
+        next_refit_at=next_refit_at,
     )
