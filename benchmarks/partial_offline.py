@@ -1,6 +1,7 @@
 """Partial re-ranking ideas in seconds: per-sample nearest distances computed once, aggregations tried.
 
     python -m benchmarks.partial_offline SRC QUERIES --out var/spec [--rerank 200] [--classes a,b]
+    python -m benchmarks.partial_offline SRC QUERIES --out var/spec --served [--every 6]
 
 Reads the eigenpairs that `benchmarks.partial_spectra cache` stored under --out, builds each mesh's fused
 global vector (shipped vocabulary) and local signature (app.core.partial, LOCAL), and, for every query,
@@ -9,6 +10,9 @@ top N: the (shifts, p, N) table from which app.core.partial_match's distance, fo
 aggregated. These tables are kept in memory (about 1 GB for 600 queries and N = 200), so each way of
 aggregating them into a ranking costs seconds; `RANKINGS` names the ones printed (mAP / NN), with the
 diagnostics of the first hits (is the own class among the candidates, at which rank is the first one).
+`--served` instead compares, query by query, the re-ranking of the global top 200 with the service's
+candidates (app.services.partial: the global top GLOBAL_KEEP and the COARSE_KEEP nearest by the coarse
+pass over every model), each re-ranked by the full partial distance, and prints the calibration.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from app.core.partial import LocalSignature
-from app.core.partial_match import CAP, MIN_SLOPES, match_many
+from app.core.partial_match import CAP, MIN_SLOPES, head, match_many
 from app.core.pipeline import LOCAL
 from app.core.vocabulary import Vocabulary
 from app.datasets.folder import read_labelled_folder
@@ -178,6 +182,34 @@ def print_calibration(own: np.ndarray, lo: float, hi: float) -> None:
                   f"reverse {own[band, 2].mean():.3f}  scale {own[band, 3].mean():.3f}")
 
 
+def served_figures(src: Path, qdir: Path, out: Path, every: int) -> None:
+    """mAP / NN and candidate recall of the global top 200 and of the service's candidates, re-ranked."""
+    from app.services.partial import COARSE_KEEP, COARSE_POINTS, GLOBAL_KEEP, RERANK
+
+    vocab = Vocabulary.load(VOCABULARY)
+    rows = read_labelled_folder(src)
+    models = [_load(out / f"{_key(src, r.path)}.npz", vocab, LOCAL) for r in rows]
+    mvec, msig = np.stack([m[0] for m in models]), [m[1] for m in models]
+    labels = np.array([r.label for r in rows])
+    res: dict[str, list[float]] = {f"{n}_{k}": [] for n in ("global", "served") for k in ("ap", "nn", "rec")}
+    for r in read_labelled_folder(qdir)[::every]:
+        vec, local = _load(out / f"{_key(qdir, r.path)}.npz", vocab, LOCAL)
+        order = np.argsort(np.abs(mvec - vec).sum(axis=1), kind="stable")
+        coarse = served(pairs(head(local, COARSE_POINTS), msig, order, order), None)
+        near = set(order[np.argsort(coarse, kind="stable")[:COARSE_KEEP]].tolist())
+        chosen = order[[j < GLOBAL_KEEP or int(m) in near for j, m in enumerate(order)]]
+        for name, cand in (("global", order[:RERANK]), ("served", chosen)):
+            headed = cand[np.argsort(served(pairs(local, msig, cand, cand), None), kind="stable")]
+            ranked = labels[np.concatenate([headed, order[~np.isin(order, cand)]])]
+            res[f"{name}_ap"].append(100 * average_precision(ranked, r.label, int((labels == r.label).sum())))
+            res[f"{name}_nn"].append(float(ranked[0] == r.label))
+            res[f"{name}_rec"].append(float((labels[cand] == r.label).any()))
+    print(f"{len(res['global_ap'])} pieces ({qdir.name}, every {every}) against {len(rows)} models")
+    for name in ("global", "served"):
+        ap, nn, rec = (np.mean(res[f"{name}_{k}"]) for k in ("ap", "nn", "rec"))
+        print(f"  {name} candidates: mAP {ap:6.2f}  NN {nn:.3f}  own class among them {rec:.3f}")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("src")
@@ -186,7 +218,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rerank", type=int, default=200)
     p.add_argument("--classes", default="")
     p.add_argument("--every", type=int, default=1, help="every n-th query only (a quick look)")
+    p.add_argument("--served", action="store_true", help="the service's candidates against the top 200")
     a = p.parse_args(argv)
+    if a.served:
+        served_figures(_folder(a.src), _folder(a.queries), a.out, a.every)
+        own = calibration(_folder(a.src), _folder(a.queries), a.out, a.every)
+        print_calibration(own, 0.4 if own[:, 0].min() < 0.6 else 0.6, 0.85)
+        return 0
     classes = set(a.classes.split(",")) if a.classes else None
     b = build(_folder(a.src), _folder(a.queries), a.out, a.rerank, classes, a.every)
     print(f"{len(b.qlabels)} pieces ({a.queries}, mean kept {b.kept.mean():.3f}) against {len(b.labels)} "
