@@ -8,7 +8,8 @@ SRC itself (whole queries: each model finds the others, itself left out). Both a
 default DescribeParams through the evaluation cache (.cache/describe), encoded with the shipped
 vocabulary (fused, as served), and ranked by L1; a query the service takes for a piece
 (app.services.partial.is_partial) has its `--rerank` nearest models re-ranked by the local signatures'
-distance, as POST /search does. Prints mAP and NN of both rankings, how many queries were taken for
+distance (POST /search's candidates also include a coarse pass: `benchmarks.partial_offline --served`).
+Prints mAP and NN of both rankings, how many queries were taken for
 pieces, the forward / reverse scores of each query's own whole model against the true kept share, and
 the CPU time of the re-ranking per query.
 """

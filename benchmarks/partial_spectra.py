@@ -1,6 +1,6 @@
 """Partial matching from cached eigenpairs: try local-signature grids without a second eigen-solve.
 
-    python -m benchmarks.partial_spectra cache SRC QUERIES... --out var/spec [--workers 2]
+    python -m benchmarks.partial_spectra cache SRC QUERIES... --out var/spec [--workers 2] [--every 2]
     python -m benchmarks.partial_spectra score SRC QUERIES --out var/spec [--rerank 100,200]
            [--classes a,b,c] [--set rim_factor=1.0 --set t0=0.004]
 
@@ -64,10 +64,11 @@ def _cache_one(job: tuple[str, str]) -> None:
     tmp.rename(out)
 
 
-def cache(folders: list[Path], out: Path, workers: int) -> None:
+def cache(folders: list[Path], out: Path, workers: int, every: int = 1) -> None:
+    """Cache every mesh of the first folder (the models) and every `every`-th of the others."""
     out.mkdir(parents=True, exist_ok=True)
     jobs = [(str(r.path), str(out / f"{_key(f, r.path)}.npz"))
-            for f in folders for r in read_labelled_folder(f)]
+            for i, f in enumerate(folders) for r in read_labelled_folder(f)[::every if i else 1]]
     with ProcessPoolExecutor(workers) as pool:
         for i, _ in enumerate(pool.map(_cache_one, jobs, chunksize=4)):
             if i % 100 == 0:
@@ -134,13 +135,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("folders", nargs="+", help="cache: folders to cache; score: SRC QUERIES")
     p.add_argument("--out", type=Path, default=Path("var/spec"))
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--every", type=int, default=1, help="cache: every n-th mesh of the query folders")
     p.add_argument("--rerank", default="100,200")
     p.add_argument("--classes", default="")
     p.add_argument("--set", action="append", default=[], help="a LocalParams field: name=value")
     a = p.parse_args(argv)
     folders = [_folder(f) for f in a.folders]
     if a.command == "cache":
-        cache(folders, a.out, a.workers)
+        cache(folders, a.out, a.workers, a.every)
         return 0
     changes = {k: type(getattr(LOCAL, k))(float(v)) for k, v in (s.split("=", 1) for s in a.set)}
     score(folders[0], folders[1], a.out, [int(n) for n in a.rerank.split(",")],

@@ -9,7 +9,8 @@ lacks costs a bounded amount) wins; under it
   between grid steps by a parabola through the scores): the area of the model the matched part of the
   query stands for, over the model's area. Counting the model samples that some query sample matches
   would count both legs for one (the slopes are the same on symmetric parts); the scale does not.
-The distance ranks candidates; forward and reverse are what a user reads.
+The distance ranks candidates; forward and reverse are what a user reads. `head` keeps a signature's
+first samples: a coarser farthest-point sample of the same shape, for a cheap first pass over many models.
 """
 
 from __future__ import annotations
@@ -32,6 +33,14 @@ class PartialMatch:
     forward: float  # in [0, 1]
     reverse: float  # in [0, 1]
     scale: float  # kept share the winning scale implies (1: the query is as large as the model)
+
+
+def head(signature: LocalSignature, count: int) -> LocalSignature:
+    """The first `count` samples of a signature: local_signature stores them in farthest-point order,
+    so they are a coarser farthest-point sample of the same surface (their areas are renormalised by
+    match_many over the trusted ones)."""
+    return LocalSignature(slopes=signature.slopes[:count], area=signature.area[:count],
+                          valid=signature.valid[:count], rim=signature.rim)
 
 
 def _sq_distances(q: np.ndarray, qvalid: np.ndarray, m: np.ndarray) -> np.ndarray:

@@ -64,12 +64,13 @@ def search_description(
     ctx: ServiceContext, live: LiveIndex, description: ShapeDescription, k: int, label: str | None = None,
     partial: bool | None = None,
 ) -> SearchResult:
-    """The k nearest models; a piece (partial, or None and the query has a rim) re-ranks the
-    RERANK nearest by their local signatures. Every hit carries forward / reverse scores."""
+    """The k nearest models; a piece (partial, or None and the query has a rim) re-ranks its
+    candidates (app.services.partial) by their local signatures. Every hit carries forward / reverse
+    scores."""
     check_k(k)
     allowed = _allowed(ctx, label)
     piece = partial_mod.is_partial(description.local, partial)
-    wanted = max(k, partial_mod.RERANK) if piece else k
+    wanted = max(k, partial_mod.COARSE_SCAN) if piece else k
     for _ in range(3):  # a vocabulary swap between encode and search: encode again
         t = time.perf_counter()
         vid, vector = live.encode(description)
@@ -91,9 +92,11 @@ def search_description(
 
 def _scored(ctx: ServiceContext, description: ShapeDescription, hits: list[Hit], k: int,
             piece: bool) -> list[Hit]:
-    """The first k hits with their forward / reverse scores; a piece's hits ordered by partial
-    distance first (models without a local signature after, in their global order)."""
-    if not piece:
+    """The first k hits with their forward / reverse scores; a piece's candidates (app.services.partial)
+    ordered by partial distance (models without a local signature after, in their global order)."""
+    if piece:  # the candidates include the global GLOBAL_KEEP >= k nearest: no other hit is needed
+        hits = [hits[j] for j in partial_mod.candidates(ctx, description.local, [h.model.id for h in hits])]
+    else:
         hits = hits[:k]
     found = partial_mod.score(ctx, description.local, [h.model.id for h in hits])
     if piece:

@@ -17,6 +17,7 @@ from app.config import DescribeSettings
 from app.datasets.synthetic import generate
 from app.main import create_app
 from app.services import ingestion
+from app.services import partial as partial_service
 from app.services.context import open_context
 from app.storage import jobs as jobs_repo
 from app.worker.runner import Worker
@@ -113,3 +114,15 @@ def test_a_bad_partial_option_is_a_clear_422(partial_dir):
         ball = _obj(_shapes()["snake"])
         r = client.post("/search", files={"file": ("q.obj", ball)}, data={"partial": "maybe"})
         assert r.status_code == 422 and "partial must be auto, true or false" in r.text
+
+
+def test_the_coarse_pass_alone_finds_a_halfs_whole(partial_dir, monkeypatch):
+    """With no global candidates, a piece's candidates are the coarse pass's nearest (a farthest-point
+    eighth of its samples): the half still finds its whole first, and only those candidates come back."""
+    data_dir, ids = partial_dir
+    monkeypatch.setattr(partial_service, "GLOBAL_KEEP", 0)
+    monkeypatch.setattr(partial_service, "COARSE_KEEP", 3)
+    with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
+        hits = _search(client, _obj(_half(_shapes()["quadruped"])))["data"]
+        assert len(hits) == 3 and hits[0]["model_id"] == ids["quadruped"]
+        assert all(h["partial"] and h["forward"] is not None for h in hits)

@@ -19,7 +19,7 @@ from app.core.partial import (
     rim_distance,
     rim_length,
 )
-from app.core.partial_match import match_many
+from app.core.partial_match import CAP, match_many
 from app.core.resolution import normalize_scale
 from app.core.spectrum import Spectrum, smallest_eigenpairs
 
@@ -175,3 +175,20 @@ def test_models_without_trusted_samples_score_nothing_and_grids_are_checked(sphe
     short = LocalSignature(sig.slopes[:, :3], sig.area, sig.valid, 0.0)
     with pytest.raises(ValueError, match="shorter"):
         match_many(sig, [short], PARAMS)
+
+
+def test_an_unmatched_part_of_the_query_costs_its_area_times_the_cap():
+    """By hand: a query sample equal to a model sample costs 0 and is found; one far from every model
+    sample costs CAP, whatever how far, so a part the model lacks weighs its area and no more."""
+    width = PARAMS.slopes + PARAMS.shifts - 1
+    model = LocalSignature(slopes=np.array([[0.0] * width, [-1.0] * width], np.float32),
+                           area=np.array([0.5, 0.5], np.float32), valid=np.array([width, width], np.int16),
+                           rim=0.0)
+    for far in (5.0, 50.0):
+        query = LocalSignature(slopes=np.array([[0.0] * width, [far] * width], np.float32),
+                               area=np.array([0.7, 0.3], np.float32),
+                               valid=np.array([width, width], np.int16), rim=1.0)
+        (m,) = match_many(query, [model], PARAMS)
+        assert m.distance == pytest.approx(0.3 * CAP)
+        assert m.forward == pytest.approx(0.7) and m.scale == pytest.approx(1.0)
+        assert m.reverse == pytest.approx(0.7)

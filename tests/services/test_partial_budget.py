@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
+from app.core.partial import LocalSignature
 from app.services import partial
 
 
@@ -45,3 +47,29 @@ def test_past_the_deadline_only_the_first_chunk_is_scored_and_in_place(scored):
 
 def test_a_query_without_a_signature_scores_nothing(scored):
     assert partial.score(SimpleNamespace(), None, [1, 2]) == [None, None]
+
+
+def test_candidates_are_the_global_head_and_the_coarse_nearest_in_global_order(monkeypatch):
+    """300 models in global order; the coarse distance (a fake matcher) prefers the last ones: the
+    candidates are the first GLOBAL_KEEP and the COARSE_KEEP coarse nearest, read on the query's head."""
+    heads: list[int] = []
+    monkeypatch.setattr(partial._CACHE, "get", lambda path: path)
+
+    def fake_match(query, models, params):
+        heads.append(len(query.slopes))
+        return [SimpleNamespace(distance=float(-m)) for m in models]  # model id m: larger is nearer
+
+    monkeypatch.setattr(partial, "match_many", fake_match)
+    monkeypatch.setattr(partial, "GLOBAL_KEEP", 10)
+    monkeypatch.setattr(partial, "COARSE_KEEP", 5)
+    ctx = SimpleNamespace(blobs=SimpleNamespace(description_path=lambda i: i))
+    query = LocalSignature(slopes=np.zeros((256, 21), np.float32), area=np.full(256, 1 / 256, np.float32),
+                           valid=np.full(256, 21, np.int16), rim=1.0)
+    ids = list(range(1000, 1300))
+    got = partial.candidates(ctx, query, ids)
+    assert got == [*range(10), *range(295, 300)]
+    assert set(heads) == {partial.COARSE_POINTS}
+    # a collection no larger than the global head needs no coarse pass; a query without a signature none
+    heads.clear()
+    assert partial.candidates(ctx, query, ids[:10]) == list(range(10)) and heads == []
+    assert partial.candidates(ctx, None, ids) == list(range(10))
