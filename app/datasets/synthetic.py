@@ -183,6 +183,8 @@ def refine(src_dir: Path | str, out_dir: Path | str, min_vertices: int) -> Path:
     labels = (src / "labels.csv").read_text()
     for rel in [line.split(",")[0] for line in labels.splitlines()[1:] if line]:
         mesh = trimesh.load(src / rel, force="mesh", process=False)
+        if not isinstance(mesh, trimesh.Trimesh):
+            raise ValueError(f"{src / rel} is not one triangle mesh")
         vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
         while len(vertices) < min_vertices:
             vertices, faces = trimesh.remesh.subdivide(vertices, faces)
