@@ -66,10 +66,11 @@ def mean_edge(mesh: Mesh) -> float:
     return float(np.linalg.norm(tri - tri[:, [1, 2, 0]], axis=2).mean())
 
 
-def vertex_subset(mesh: Mesh) -> np.ndarray:
-    """(<= MAX_VERTICES, 3) the vertices that some face uses, an even stride through a large mesh."""
+def vertex_subset(mesh: Mesh, limit: int | None = None) -> np.ndarray:
+    """(<= limit or MAX_VERTICES, 3) the vertices that some face uses, an even stride through a large
+    mesh."""
     used = mesh.vertices[np.unique(mesh.faces)]
-    return used[:: max(1, -(-len(used) // MAX_VERTICES))]
+    return used[:: max(1, -(-len(used) // (limit or MAX_VERTICES)))]
 
 
 def slack(edge: float, other_edge: float) -> float:

@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from app.core.variants.align import Similarity, hypotheses, icp, to_world, umeyama
+from app.core.variants.align import Similarity, hypotheses, icp_batch, to_world, umeyama
 from app.core.variants.onesided import lies_on, vertex_subset
 from app.core.variants.prepared import Prepared, face_keys
 
@@ -32,13 +32,19 @@ CHAMFER_MAX = 0.006  # same surface: mean surface distance below 0.6 % of the di
 HAUSDORFF_MAX = 0.06  # ... and no point farther than 6 % (a punched hole, a decimated corner)
 COVER_TOLERANCE = 0.01  # a sample is "covered" by the other surface within 1 % of the diagonal
 IDENTITY_TOL = 1e-4  # rotation angle (rad), |log scale| and translation / diagonal read as "none"
-COARSE_POINTS = 256  # ICP on a subsample to rank the hypotheses, then the full samples on the best
+COARSE_POINTS = 256  # ICP on a subsample to rank the hypotheses, then more points on the best
 FINE_POINTS = 1024
+SCREEN_POINTS = 64  # past 2 SCREEN_KEEP hypotheses, a 3-round ICP on this many points screens them ...
+SCREEN_KEEP = 2  # ... and the best this many of each handedness go on
 MIRROR_MARGIN = 0.8  # an improper fit wins only when its ICP cost is 20 % lower
-REFINE = 2  # hypotheses refined per handedness
+QUICK_POINTS = 256  # surface distances on this many samples under the coarse fit first ...
+QUICK_MARGIN = 2.0  # ... and twice past every tolerance there is `similar` without more work
 EXACT_ROUNDS = 4
 EXACT_TOL = 1e-4  # same triangles: every vertex within this fraction of the diagonal of its partner
-MAX_PARTS = 8  # objects of a multi-object mesh verified one by one
+MAX_PARTS = 8  # objects of a multi-object mesh verified one by one ...
+PART_RADIUS = 1.0  # ... against the objects of the other whose fingerprints are this close (the lookup's
+# radius, collection.RADIUS: a decimation to 10 % moves its fingerprint up to about 0.9), the nearest
+PART_TRIES = 3  # this many of them tried before an object is given up
 ONE_SIDED_CHAMFER = 0.06  # past this symmetric mean distance the one-sided test is not tried
 
 
@@ -88,39 +94,60 @@ def relate(a: Prepared, b: Prepared) -> Evidence:
 
 
 def verify(a: Prepared, b: Prepared) -> Evidence:
-    """Whole surface against whole surface: the exact relations, retriangulated or similar."""
+    """Whole surface against whole surface: the exact relations, retriangulated or similar.
+
+    The axis hypotheses are fitted on a few hundred points; unless the same triangles fit, the surface
+    distances are measured on QUICK_POINTS samples under the best of them, and a pair far from any
+    relation there is decided `similar`; only the others get the fit polished on more points, with
+    scale, and the distances on the full samples."""
     exact = _exact(a, b, Similarity(1.0, np.eye(3), np.zeros(3)))  # in place: no search needed
     if exact is not None:
         return _exact_evidence(b, *exact)
     fa, fb = a.frame, b.frame
-    coarse = a.normalised_samples[:: max(1, len(a.normalised_samples) // COARSE_POINTS)]
-    fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
-    ranked: list[tuple[float, Similarity]] = []
-    for start in hypotheses(fa, fb):
-        fit, cost = icp(coarse, b.normalised_tree, b.normalised_samples, start, iterations=10)
-        ranked.append((cost, fit))
-    ranked.sort(key=lambda r: (r[1].mirrored, r[0]))  # proper first: a symmetric shape is not "mirrored"
+    ranked = _hypotheses(a, b)
     best_cost = min(r[0] for r in ranked)
     for cost, fit in ranked:  # the same triangles under any hypothesis about as good as the best
         if cost <= 2.0 * best_cost + 1e-3:
             exact = _exact(a, b, to_world(fa, fb, fit))
             if exact is not None:
                 return _exact_evidence(b, *exact)
-    refined: list[tuple[float, Similarity]] = []
-    for mirrored in (False, True):
-        for _, rough in [r for r in ranked if r[1].mirrored == mirrored][:REFINE]:
-            fit, cost = icp(fine, b.normalised_tree, b.normalised_samples, rough.rotation, with_scale=True)
-            refined.append((cost, to_world(fa, fb, fit)))
-    refined.sort(key=lambda r: r[0])
-    for _, sim in refined[:1]:  # the best fit, polished on the vertices when they are the same
-        exact = _exact(a, b, sim)
-        if exact is not None:
-            return _exact_evidence(b, *exact)
-    proper = min((r for r in refined if not r[1].mirrored), key=lambda r: r[0])
-    improper = min((r for r in refined if r[1].mirrored), key=lambda r: r[0])
-    # a (nearly) mirror-symmetric shape fits both ways: call it mirrored only when clearly better
-    best = improper if improper[0] < MIRROR_MARGIN * proper[0] else proper
+    quick = _evidence(a, b, to_world(fa, fb, min(ranked, key=lambda r: r[0])[1]), points=QUICK_POINTS)
+    if quick.relation == "similar" and quick.confidence >= 1.0 - 0.5 / QUICK_MARGIN:
+        return quick  # far from any relation on a subsample (margin >= QUICK_MARGIN): decided
+    # polish the best proper fit, and the best mirrored one only where it competes (see MIRROR_MARGIN)
+    proper = next(r for r in ranked if not r[1].mirrored)
+    rough = [proper[1]] + [r[1] for r in ranked if r[1].mirrored and r[0] < proper[0]][:1]
+    rough = [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough]  # centroids already meet at 0
+    fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
+    fits, costs = icp_batch(fine, b.normalised_tree, b.normalised_samples, rough, with_scale=True)
+    refined = sorted(zip(costs.tolist(), [to_world(fa, fb, f) for f in fits], strict=True),
+                     key=lambda r: r[0])
+    exact = _exact(a, b, refined[0][1])  # the best fit, polished on the vertices when they are the same
+    if exact is not None:
+        return _exact_evidence(b, *exact)
+    best = refined[0]
+    if best[1].mirrored and best[0] >= MIRROR_MARGIN * refined[1][0]:
+        best = refined[1]  # a (nearly) mirror-symmetric shape fits both ways: mirrored only when clearly
     return _evidence(a, b, best[1])
+
+
+def _hypotheses(a: Prepared, b: Prepared) -> list[tuple[float, Similarity]]:
+    """(ICP cost, fit in normalised coordinates) for each axis hypothesis, proper ones first, each
+    handedness by cost. Many hypotheses (a shape with no clear axes) are screened on a few points
+    first, and only the best SCREEN_KEEP of each handedness go on."""
+    starts = [Similarity(1.0, r, np.zeros(3)) for r in hypotheses(a.frame, b.frame)]
+    pts = a.normalised_samples
+    if len(starts) > 2 * SCREEN_KEEP:
+        screen = pts[:: max(1, len(pts) // SCREEN_POINTS)]
+        fits, costs = icp_batch(screen, b.normalised_tree, b.normalised_samples, starts, iterations=3)
+        order = np.argsort(costs)
+        starts = [fits[i] for i in order if not fits[i].mirrored][:SCREEN_KEEP] + [
+            fits[i] for i in order if fits[i].mirrored][:SCREEN_KEEP]
+    coarse = pts[:: max(1, len(pts) // COARSE_POINTS)]
+    fits, costs = icp_batch(coarse, b.normalised_tree, b.normalised_samples, starts, iterations=10)
+    ranked = list(zip(costs.tolist(), fits, strict=True))
+    ranked.sort(key=lambda r: (r[1].mirrored, r[0]))  # proper first: a symmetric shape is not "mirrored"
+    return ranked
 
 
 def _exact(a: Prepared, b: Prepared, guess: Similarity) -> tuple[Similarity, float] | None:
@@ -167,10 +194,14 @@ def _exact_evidence(b: Prepared, sim: Similarity, residual: float) -> Evidence:
                     True, sim.matrix().tolist())
 
 
-def _evidence(a: Prepared, b: Prepared, sim: Similarity, one_sided: bool = True) -> Evidence:
+def _evidence(
+    a: Prepared, b: Prepared, sim: Similarity, one_sided: bool = True, points: int | None = None
+) -> Evidence:
+    """The surface distances under `sim` (a's and b's samples, or the first `points` of them: the
+    samples are drawn independently, so a prefix is a random subsample), and the one-sided test."""
     diag = b.diagonal
-    ab = b.distance_to(sim.apply(a.samples[0]))  # (N,) a's samples to b's surface
-    ba = a.distance_to(_inverse(sim).apply(b.samples[0])) * sim.scale  # (N,) b's samples to a's, b's units
+    ab = b.distance_to(sim.apply(a.samples[0][:points]))  # (N,) a's samples to b's surface
+    ba = a.distance_to(_inverse(sim).apply(b.samples[0][:points])) * sim.scale  # (N,) b's to a's, b's units
     chamfer = 0.5 * float(ab.mean() + ba.mean()) / diag
     hausdorff = float(max(ab.max(), ba.max())) / diag
     forward = float((ab <= COVER_TOLERANCE * diag).mean())
@@ -180,8 +211,9 @@ def _evidence(a: Prepared, b: Prepared, sim: Similarity, one_sided: bool = True)
     if one_sided and margin >= 1.0 and chamfer < ONE_SIDED_CHAMFER:  # a coarser copy on the finer surface?
         inverse = _inverse(sim)
         on = lies_on(
-            b.distance_to(sim.apply(vertex_subset(a.mesh))) / diag, ba / diag, a.mean_edge * sim.scale / diag,
-            a.distance_to(inverse.apply(vertex_subset(b.mesh))) * sim.scale / diag, ab / diag,
+            b.distance_to(sim.apply(vertex_subset(a.mesh, points))) / diag, ba / diag,
+            a.mean_edge * sim.scale / diag,
+            a.distance_to(inverse.apply(vertex_subset(b.mesh, points))) * sim.scale / diag, ab / diag,
             b.mean_edge / diag,
         )
         extra = {"lies_on_other": on.a_on_b, "resolution": on.resolution, "slack": on.slack,
@@ -214,21 +246,29 @@ def _inverse(sim: Similarity) -> Similarity:
 def _parts_in(small: Prepared, big: Prepared) -> Evidence | None:
     """Every object of `small` matched to an object of `big` (whole-surface relation other than
     similar); the evidence of the largest object's match, with the copies of it that `big` holds."""
-    first: Evidence | None = None
-    for part in small.parts[:MAX_PARTS]:
-        order = np.argsort([np.linalg.norm(part.fingerprint - o.fingerprint) for o in big.parts])
-        matches = []
-        for j in order[: 2 * MAX_PARTS]:
-            ev = verify(part, big.parts[int(j)])
+    parts = small.parts[:MAX_PARTS]
+    gaps = np.linalg.norm(np.array([p.fingerprint for p in parts])[:, None]
+                          - np.array([o.fingerprint for o in big.parts])[None], axis=2)  # (parts, objects)
+    if not (gaps <= PART_RADIUS).any(axis=1).all():
+        return None  # an object with no object of `big` near enough to be related: nothing to verify
+    found: dict[int, list[Evidence]] = {}
+    for i in np.argsort(-gaps.min(axis=1)):  # the object least likely to match first: a miss ends it
+        row = gaps[i]
+        order = [j for j in np.argsort(row) if row[j] <= PART_RADIUS]  # farther: no relation is possible
+        matches: list[Evidence] = []
+        for n, j in enumerate(order[: 2 * MAX_PARTS]):
+            if not matches and n >= PART_TRIES:
+                break  # its nearest objects are not it: a farther one will not be either
+            ev = verify(parts[i], big.parts[int(j)])
             if ev.relation != "similar":
                 matches.append(ev)
             elif matches:
                 break  # candidates come nearest first: the copies are together at the front
         if not matches:
             return None
-        if first is None:
-            first = Evidence(**{**matches[0].to_dict(), "copies": len(matches)})
-    assert first is not None
+        found[int(i)] = matches
+    matches = found[0]  # the evidence of the largest object (objects come largest first)
+    first = Evidence(**{**matches[0].to_dict(), "copies": len(matches)})
     # coverage against the whole of `big`, as the whole-surface check measures it
     placed = Similarity(first.scale, np.asarray(first.transform)[:3, :3] / first.scale,
                         np.asarray(first.transform)[:3, 3])
