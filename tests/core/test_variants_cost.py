@@ -31,14 +31,15 @@ def _plate(meshes: list[Mesh]) -> Mesh:
 
 
 class Count:
-    """Wraps a function of the relate module and counts its calls (and those with a keyword set)."""
+    """Wraps a function of the relate module and records its calls: keywords, and the length of the
+    first argument when it is an array (the points an ICP fits)."""
 
     def __init__(self, monkeypatch: pytest.MonkeyPatch, name: str) -> None:
         self.calls: list[dict] = []
         real = getattr(R, name)
 
         def wrapped(*args, **kwargs):
-            self.calls.append(kwargs)
+            self.calls.append({**kwargs, "n": len(args[0]) if isinstance(args[0], np.ndarray) else None})
             return real(*args, **kwargs)
 
         monkeypatch.setattr(R, name, wrapped)
@@ -57,17 +58,19 @@ def test_a_pair_far_from_any_relation_is_decided_on_the_subsample(monkeypatch) -
         ev = relate(Prepared(a), Prepared(b))
         assert ev.relation == "similar"
         assert ev.confidence >= 1.0 - 0.5 / R.QUICK_MARGIN  # its margin on the subsample
-        assert not [c for c in fits.calls if c.get("with_scale")]  # no fine fit was made
+        assert fits.calls and max(c["n"] for c in fits.calls) <= R.COARSE_POINTS  # no fine fit made
         assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS]  # the full samples unused
 
 
 def test_a_true_retriangulation_gets_the_fine_fit_and_the_full_samples(monkeypatch) -> None:
     evidence = Count(monkeypatch, "_evidence")
+    fits = Count(monkeypatch, "icp_batch")
     hull = _hull(7)
     v, f = trimesh.remesh.subdivide(hull.vertices, hull.faces)
     ev = relate(Prepared(Mesh(v, f)), Prepared(hull))
     assert ev.relation == "retriangulated" and ev.chamfer < 1e-3
     assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS, None]
+    assert max(c["n"] for c in fits.calls) > R.COARSE_POINTS  # the fine fit was made
 
 
 def test_objects_far_in_fingerprint_are_not_verified(monkeypatch) -> None:

@@ -35,7 +35,8 @@ IDENTITY_TOL = 1e-4  # rotation angle (rad), |log scale| and translation / diago
 COARSE_POINTS = 256  # ICP on a subsample to rank the hypotheses, then more points on the best
 FINE_POINTS = 1024
 SCREEN_POINTS = 64  # past 2 SCREEN_KEEP hypotheses, a 3-round ICP on this many points screens them ...
-SCREEN_KEEP = 2  # ... and the best this many of each handedness go on
+SCREEN_KEEP = 2  # ... and the best this many of each handedness go on (the 8 sign choices: 4) ...
+SCREEN_KEEP_EXACT = 4  # ... or this many when the face counts allow the same triangles (all 8 kept)
 MIRROR_MARGIN = 0.8  # an improper fit wins only when its ICP cost is 20 % lower
 QUICK_POINTS = 256  # surface distances on this many samples under the coarse fit first ...
 QUICK_MARGIN = 2.0  # ... and twice past every tolerance there is `similar` without more work
@@ -96,53 +97,71 @@ def relate(a: Prepared, b: Prepared) -> Evidence:
 def verify(a: Prepared, b: Prepared) -> Evidence:
     """Whole surface against whole surface: the exact relations, retriangulated or similar.
 
-    The axis hypotheses are fitted on a few hundred points; unless the same triangles fit, the surface
-    distances are measured on QUICK_POINTS samples under the best of them, and a pair far from any
-    relation there is decided `similar`; only the others get the fit polished on more points, with
-    scale, and the distances on the full samples."""
+    The axis hypotheses are fitted on a few hundred points (screened first on fewer, more of them kept
+    when the face counts allow the same triangles); unless the same triangles fit, the best fit is
+    polished with scale on those points and the surface distances are measured on QUICK_POINTS
+    samples: a pair far from any relation there is decided `similar`. Only the others get the fit
+    polished on FINE_POINTS and the distances on the full samples."""
     exact = _exact(a, b, Similarity(1.0, np.eye(3), np.zeros(3)))  # in place: no search needed
     if exact is not None:
         return _exact_evidence(b, *exact)
     fa, fb = a.frame, b.frame
-    ranked = _hypotheses(a, b)
+    same_count = _face_counts_match(a, b)
+    ranked = _hypotheses(a, b, SCREEN_KEEP_EXACT if same_count else SCREEN_KEEP)
     best_cost = min(r[0] for r in ranked)
-    for cost, fit in ranked:  # the same triangles under any hypothesis about as good as the best
+    for cost, fit in ranked if same_count else []:  # the same triangles under a fit near the best
         if cost <= 2.0 * best_cost + 1e-3:
             exact = _exact(a, b, to_world(fa, fb, fit))
             if exact is not None:
                 return _exact_evidence(b, *exact)
-    quick = _evidence(a, b, to_world(fa, fb, min(ranked, key=lambda r: r[0])[1]), points=QUICK_POINTS)
-    if quick.relation == "similar" and quick.confidence >= 1.0 - 0.5 / QUICK_MARGIN:
-        return quick  # far from any relation on a subsample (margin >= QUICK_MARGIN): decided
-    # polish the best proper fit, and the best mirrored one only where it competes (see MIRROR_MARGIN)
+    # the best proper fit, and the best mirrored one only where it competes (see MIRROR_MARGIN), with
+    # scale, from their turns alone (the centroids already meet at 0)
     proper = next(r for r in ranked if not r[1].mirrored)
     rough = [proper[1]] + [r[1] for r in ranked if r[1].mirrored and r[0] < proper[0]][:1]
-    rough = [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough]  # centroids already meet at 0
+    rough = [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough]
+    coarse = a.normalised_samples[:: max(1, len(a.normalised_samples) // COARSE_POINTS)]
+    quick = _evidence(a, b, _polished(a, b, coarse, rough)[1], points=QUICK_POINTS)
+    if quick.relation == "similar" and quick.confidence >= 1.0 - 0.5 / QUICK_MARGIN:
+        return quick  # far from any relation on a subsample (margin >= QUICK_MARGIN): decided
     fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
-    fits, costs = icp_batch(fine, b.normalised_tree, b.normalised_samples, rough, with_scale=True)
-    refined = sorted(zip(costs.tolist(), [to_world(fa, fb, f) for f in fits], strict=True),
-                     key=lambda r: r[0])
-    exact = _exact(a, b, refined[0][1])  # the best fit, polished on the vertices when they are the same
+    cost, best = _polished(a, b, fine, rough)
+    exact = _exact(a, b, best) if same_count else None  # the same vertices after all?
     if exact is not None:
         return _exact_evidence(b, *exact)
+    return _evidence(a, b, best)
+
+
+def _face_counts_match(a: Prepared, b: Prepared) -> bool:
+    """Whether a and b may have the same triangles (a format's rounding may join a few vertices)."""
+    return 0.98 * b.mesh.n_faces <= a.mesh.n_faces <= 1.02 * b.mesh.n_faces + 2
+
+
+def _polished(
+    a: Prepared, b: Prepared, points: np.ndarray, rough: list[Similarity]
+) -> tuple[float, Similarity]:
+    """ICP with scale of `points` (a's, normalised) from each rough fit; the best as (cost, similarity
+    between the meshes' own coordinates), a mirrored one only when clearly better (MIRROR_MARGIN)."""
+    fits, costs = icp_batch(points, b.normalised_tree, b.normalised_samples, rough, with_scale=True)
+    refined = sorted(zip(costs.tolist(), [to_world(a.frame, b.frame, f) for f in fits], strict=True),
+                     key=lambda r: r[0])
     best = refined[0]
     if best[1].mirrored and best[0] >= MIRROR_MARGIN * refined[1][0]:
         best = refined[1]  # a (nearly) mirror-symmetric shape fits both ways: mirrored only when clearly
-    return _evidence(a, b, best[1])
+    return best
 
 
-def _hypotheses(a: Prepared, b: Prepared) -> list[tuple[float, Similarity]]:
+def _hypotheses(a: Prepared, b: Prepared, keep: int) -> list[tuple[float, Similarity]]:
     """(ICP cost, fit in normalised coordinates) for each axis hypothesis, proper ones first, each
-    handedness by cost. Many hypotheses (a shape with no clear axes) are screened on a few points
-    first, and only the best SCREEN_KEEP of each handedness go on."""
+    handedness by cost. More than 2 `keep` hypotheses are screened on a few points first, and only
+    the best `keep` of each handedness go on."""
     starts = [Similarity(1.0, r, np.zeros(3)) for r in hypotheses(a.frame, b.frame)]
     pts = a.normalised_samples
-    if len(starts) > 2 * SCREEN_KEEP:
+    if len(starts) > 2 * keep:
         screen = pts[:: max(1, len(pts) // SCREEN_POINTS)]
         fits, costs = icp_batch(screen, b.normalised_tree, b.normalised_samples, starts, iterations=3)
         order = np.argsort(costs)
-        starts = [fits[i] for i in order if not fits[i].mirrored][:SCREEN_KEEP] + [
-            fits[i] for i in order if fits[i].mirrored][:SCREEN_KEEP]
+        starts = [fits[i] for i in order if not fits[i].mirrored][:keep] + [
+            fits[i] for i in order if fits[i].mirrored][:keep]
     coarse = pts[:: max(1, len(pts) // COARSE_POINTS)]
     fits, costs = icp_batch(coarse, b.normalised_tree, b.normalised_samples, starts, iterations=10)
     ranked = list(zip(costs.tolist(), fits, strict=True))
@@ -155,7 +174,7 @@ def _exact(a: Prepared, b: Prepared, guess: Similarity) -> tuple[Similarity, flo
     triangles are b's triangles under it: every vertex of a within EXACT_TOL of a vertex of b,
     and a's triangles, through that vertex map, exactly b's set of triangles. The map may join two of
     a's vertices that a file format's rounding made one (a weld), never two distinct ones."""
-    if not 0.98 * b.mesh.n_faces <= a.mesh.n_faces <= 1.02 * b.mesh.n_faces + 2:
+    if not _face_counts_match(a, b):
         return None
     va, vb = a.mesh.vertices, b.mesh.vertices
     fit = guess
