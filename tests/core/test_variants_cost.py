@@ -58,7 +58,7 @@ def test_a_pair_far_from_any_relation_is_decided_on_the_subsample(monkeypatch) -
         ev = relate(Prepared(a), Prepared(b))
         assert ev.relation == "similar"
         assert ev.confidence >= 1.0 - 0.5 / R.QUICK_MARGIN  # its margin on the subsample
-        assert fits.calls and max(c["n"] for c in fits.calls) <= R.COARSE_POINTS  # no fine fit made
+        assert fits.calls and max(c["n"] for c in fits.calls) <= R.QUICK_POINTS  # no fine fit made
         assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS]  # the full samples unused
 
 
@@ -70,7 +70,7 @@ def test_a_true_retriangulation_gets_the_fine_fit_and_the_full_samples(monkeypat
     ev = relate(Prepared(Mesh(v, f)), Prepared(hull))
     assert ev.relation == "retriangulated" and ev.chamfer < 1e-3
     assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS, None]
-    assert max(c["n"] for c in fits.calls) > R.COARSE_POINTS  # the fine fit was made
+    assert max(c["n"] for c in fits.calls) > R.QUICK_POINTS  # the fine fit was made
 
 
 def test_objects_far_in_fingerprint_are_not_verified(monkeypatch) -> None:

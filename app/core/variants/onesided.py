@@ -97,6 +97,12 @@ def side(
     return edge, s, gap, uncovered, margin
 
 
+def cover_margin(other_dist: np.ndarray, edge: float, other_edge: float) -> float:
+    """side()'s coverage term alone, a lower bound of its margin (the vertex terms can only raise it):
+    other_dist (m,) the other's surface samples to the lying mesh, relative to the diagonal."""
+    return float(np.quantile(other_dist, 0.9)) / max(COVER_FLOOR, COVER_TOL * slack(edge, other_edge))
+
+
 def lies_on(
     a_vertex_dist: np.ndarray, b_sample_dist: np.ndarray, a_edge: float,
     b_vertex_dist: np.ndarray, a_sample_dist: np.ndarray, b_edge: float,

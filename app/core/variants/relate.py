@@ -22,8 +22,8 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from app.core.variants.align import Similarity, hypotheses, icp_batch, to_world, umeyama
-from app.core.variants.onesided import lies_on, vertex_subset
+from app.core.variants.align import ICP_ITERATIONS, Similarity, hypotheses, icp_batch, to_world, umeyama
+from app.core.variants.onesided import cover_margin, lies_on, vertex_subset
 from app.core.variants.prepared import Prepared, face_keys
 
 RELATIONS = ("identical", "moved", "rescaled", "mirrored", "retriangulated", "part_of", "contains", "similar")
@@ -32,20 +32,21 @@ CHAMFER_MAX = 0.006  # same surface: mean surface distance below 0.6 % of the di
 HAUSDORFF_MAX = 0.06  # ... and no point farther than 6 % (a punched hole, a decimated corner)
 COVER_TOLERANCE = 0.01  # a sample is "covered" by the other surface within 1 % of the diagonal
 IDENTITY_TOL = 1e-4  # rotation angle (rad), |log scale| and translation / diagonal read as "none"
-COARSE_POINTS = 256  # ICP on a subsample to rank the hypotheses, then more points on the best
+COARSE_POINTS = 128  # ICP on a subsample to rank the hypotheses, then more points on the best
 FINE_POINTS = 1024
 SCREEN_POINTS = 64  # past 2 SCREEN_KEEP hypotheses, a 3-round ICP on this many points screens them ...
 SCREEN_KEEP = 2  # ... and the best this many of each handedness go on (the 8 sign choices: 4) ...
 SCREEN_KEEP_EXACT = 4  # ... or this many when the face counts allow the same triangles (all 8 kept)
 MIRROR_MARGIN = 0.8  # an improper fit wins only when its ICP cost is 20 % lower
-QUICK_POINTS = 256  # surface distances on this many samples under the coarse fit first ...
+QUICK_POINTS = 256  # the best fit polished (QUICK_ROUNDS) and the distances measured on this many first ...
+QUICK_ROUNDS = 8
 QUICK_MARGIN = 2.0  # ... and twice past every tolerance there is `similar` without more work
 EXACT_ROUNDS = 4
 EXACT_TOL = 1e-4  # same triangles: every vertex within this fraction of the diagonal of its partner
 MAX_PARTS = 8  # objects of a multi-object mesh verified one by one ...
 PART_RADIUS = 1.0  # ... against the objects of the other whose fingerprints are this close (the lookup's
 # radius, collection.RADIUS: a decimation to 10 % moves its fingerprint up to about 0.9), the nearest
-PART_TRIES = 3  # this many of them tried before an object is given up
+PART_TRIES = 2  # this many of them tried before an object is given up
 ONE_SIDED_CHAMFER = 0.06  # past this symmetric mean distance the one-sided test is not tried
 
 
@@ -118,13 +119,13 @@ def verify(a: Prepared, b: Prepared) -> Evidence:
     # scale, from their turns alone (the centroids already meet at 0)
     proper = next(r for r in ranked if not r[1].mirrored)
     rough = [proper[1]] + [r[1] for r in ranked if r[1].mirrored and r[0] < proper[0]][:1]
-    rough = [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough]
-    coarse = a.normalised_samples[:: max(1, len(a.normalised_samples) // COARSE_POINTS)]
-    quick = _evidence(a, b, _polished(a, b, coarse, rough)[1], points=QUICK_POINTS)
+    quick_points = a.normalised_samples[:: max(1, len(a.normalised_samples) // QUICK_POINTS)]
+    _, quick_fit = _polished(a, b, quick_points, rough, QUICK_ROUNDS)
+    quick = _evidence(a, b, quick_fit, points=QUICK_POINTS)
     if quick.relation == "similar" and quick.confidence >= 1.0 - 0.5 / QUICK_MARGIN:
         return quick  # far from any relation on a subsample (margin >= QUICK_MARGIN): decided
     fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
-    cost, best = _polished(a, b, fine, rough)
+    cost, best = _polished(a, b, fine, [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough])
     exact = _exact(a, b, best) if same_count else None  # the same vertices after all?
     if exact is not None:
         return _exact_evidence(b, *exact)
@@ -137,11 +138,11 @@ def _face_counts_match(a: Prepared, b: Prepared) -> bool:
 
 
 def _polished(
-    a: Prepared, b: Prepared, points: np.ndarray, rough: list[Similarity]
+    a: Prepared, b: Prepared, points: np.ndarray, rough: list[Similarity], rounds: int = ICP_ITERATIONS
 ) -> tuple[float, Similarity]:
     """ICP with scale of `points` (a's, normalised) from each rough fit; the best as (cost, similarity
     between the meshes' own coordinates), a mirrored one only when clearly better (MIRROR_MARGIN)."""
-    fits, costs = icp_batch(points, b.normalised_tree, b.normalised_samples, rough, with_scale=True)
+    fits, costs = icp_batch(points, b.normalised_tree, b.normalised_samples, rough, rounds, with_scale=True)
     refined = sorted(zip(costs.tolist(), [to_world(a.frame, b.frame, f) for f in fits], strict=True),
                      key=lambda r: r[0])
     best = refined[0]
@@ -217,7 +218,9 @@ def _evidence(
     a: Prepared, b: Prepared, sim: Similarity, one_sided: bool = True, points: int | None = None
 ) -> Evidence:
     """The surface distances under `sim` (a's and b's samples, or the first `points` of them: the
-    samples are drawn independently, so a prefix is a random subsample), and the one-sided test."""
+    samples are drawn independently, so a prefix is a random subsample), and the one-sided test
+    (on a subsample, skipped when the coverage alone puts it QUICK_MARGIN past its tolerance: the
+    margin said is then that bound)."""
     diag = b.diagonal
     ab = b.distance_to(sim.apply(a.samples[0][:points]))  # (N,) a's samples to b's surface
     ba = a.distance_to(_inverse(sim).apply(b.samples[0][:points])) * sim.scale  # (N,) b's to a's, b's units
@@ -227,13 +230,17 @@ def _evidence(
     reverse = float((ba <= COVER_TOLERANCE * diag).mean())
     margin = max(chamfer / CHAMFER_MAX, hausdorff / HAUSDORFF_MAX)
     extra: dict = {}
+    a_edge, b_edge = a.mean_edge * sim.scale / diag, b.mean_edge / diag
+    if points is not None and one_sided and margin >= 1.0 and chamfer < ONE_SIDED_CHAMFER:
+        # on a subsample, a coverage far outside both directions' tolerances decides without the vertices
+        bound = min(cover_margin(ba / diag, a_edge, b_edge), cover_margin(ab / diag, b_edge, a_edge))
+        if bound >= QUICK_MARGIN:
+            one_sided, margin = False, min(margin, bound)
     if one_sided and margin >= 1.0 and chamfer < ONE_SIDED_CHAMFER:  # a coarser copy on the finer surface?
         inverse = _inverse(sim)
         on = lies_on(
-            b.distance_to(sim.apply(vertex_subset(a.mesh, points))) / diag, ba / diag,
-            a.mean_edge * sim.scale / diag,
-            a.distance_to(inverse.apply(vertex_subset(b.mesh, points))) * sim.scale / diag, ab / diag,
-            b.mean_edge / diag,
+            b.distance_to(sim.apply(vertex_subset(a.mesh, points))) / diag, ba / diag, a_edge,
+            a.distance_to(inverse.apply(vertex_subset(b.mesh, points))) * sim.scale / diag, ab / diag, b_edge,
         )
         extra = {"lies_on_other": on.a_on_b, "resolution": on.resolution, "slack": on.slack,
                  "vertex_gap": on.vertex_gap, "uncovered": on.uncovered}
