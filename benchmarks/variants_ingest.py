@@ -9,7 +9,9 @@ models stored before it, verification of the candidates, links written), twice o
 of the collection: with the cache of prepared candidate meshes, and with a cache that keeps nothing
 (every candidate read and prepared afresh, as before the cache). Prints the totals and the overhead,
 in wall-clock seconds and in this process's CPU seconds (on a machine shared with other work the wall
-clock counts the waits; the CPU seconds are the cost).
+clock counts the waits; the CPU seconds are the cost). BLAS runs on one thread, as in the service's
+worker processes (app/worker/processes.py): with a thread per core on a busy machine, describe's
+eigensolves spin and wait, and its time (the denominator) grows several-fold.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from app.core.mesh import InvalidMeshError, load_mesh
 from app.datasets import locate
 from app.services import ingestion, variants
 from app.services.context import ServiceContext, open_context
+from app.worker.processes import pin_threads
 from benchmarks.common import machine, table
 
 
@@ -73,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--max-vertices", type=int, default=60_000)
     ap.add_argument("--cached-only", action="store_true", help="only the run with the cache (the service's)")
     args = ap.parse_args(argv)
+    pin_threads()  # one BLAS thread, as the service's workers run an ingest: several would inflate describe
     try:
         root = locate.require("realworld")
     except locate.DatasetMissing as exc:
