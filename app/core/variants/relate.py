@@ -38,6 +38,7 @@ SCREEN_POINTS = 64  # past 2 SCREEN_KEEP hypotheses, a 3-round ICP on this many 
 SCREEN_KEEP = 2  # ... and the best this many of each handedness go on (the 8 sign choices: 4) ...
 SCREEN_KEEP_EXACT = 4  # ... or this many when the face counts allow the same triangles (all 8 kept)
 MIRROR_MARGIN = 0.8  # an improper fit wins only when its ICP cost is 20 % lower
+REFINE = 2  # hypotheses of each handedness polished on FINE_POINTS when the quick decision is not made
 QUICK_POINTS = 256  # the best fit polished (QUICK_ROUNDS) and the distances measured on this many first ...
 QUICK_ROUNDS = 8
 QUICK_MARGIN = 3.0  # ... and three times past every tolerance there is `similar` without more work
@@ -115,8 +116,8 @@ def verify(a: Prepared, b: Prepared) -> Evidence:
             exact = _exact(a, b, to_world(fa, fb, fit))
             if exact is not None:
                 return _exact_evidence(b, *exact)
-    # the best proper fit, and the best mirrored one only where it competes (see MIRROR_MARGIN), with
-    # scale, from their turns alone (the centroids already meet at 0)
+    # the best proper coarse fit, and the best mirrored one only where it competes (see MIRROR_MARGIN),
+    # polished with scale on a few hundred points for the quick decision
     proper = next(r for r in ranked if not r[1].mirrored)
     rough = [proper[1]] + [r[1] for r in ranked if r[1].mirrored and r[0] < proper[0]][:1]
     quick_points = a.normalised_samples[:: max(1, len(a.normalised_samples) // QUICK_POINTS)]
@@ -124,6 +125,10 @@ def verify(a: Prepared, b: Prepared) -> Evidence:
     quick = _evidence(a, b, quick_fit, points=QUICK_POINTS)
     if quick.relation == "similar" and quick.confidence >= 1.0 - 0.5 / QUICK_MARGIN:
         return quick  # far from any relation on a subsample (margin >= QUICK_MARGIN): decided
+    # undecided: the best REFINE of each handedness polished on more points, from their turns alone
+    # (the centroids already meet at 0)
+    rough = [r[1] for r in ranked if not r[1].mirrored][:REFINE]
+    rough += [r[1] for r in ranked if r[1].mirrored][:REFINE]
     fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
     cost, best = _polished(a, b, fine, [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough])
     exact = _exact(a, b, best) if same_count else None  # the same vertices after all?
@@ -143,12 +148,13 @@ def _polished(
     """ICP with scale of `points` (a's, normalised) from each rough fit; the best as (cost, similarity
     between the meshes' own coordinates), a mirrored one only when clearly better (MIRROR_MARGIN)."""
     fits, costs = icp_batch(points, b.normalised_tree, b.normalised_samples, rough, rounds, with_scale=True)
-    refined = sorted(zip(costs.tolist(), [to_world(a.frame, b.frame, f) for f in fits], strict=True),
-                     key=lambda r: r[0])
-    best = refined[0]
-    if best[1].mirrored and best[0] >= MIRROR_MARGIN * refined[1][0]:
-        best = refined[1]  # a (nearly) mirror-symmetric shape fits both ways: mirrored only when clearly
-    return best
+    refined = list(zip(costs.tolist(), [to_world(a.frame, b.frame, f) for f in fits], strict=True))
+    proper = min((r for r in refined if not r[1].mirrored), key=lambda r: r[0], default=None)
+    improper = min((r for r in refined if r[1].mirrored), key=lambda r: r[0], default=None)
+    if proper is None or (improper is not None and improper[0] < MIRROR_MARGIN * proper[0]):
+        assert improper is not None
+        return improper  # a (nearly) mirror-symmetric shape fits both ways: mirrored only when clearly
+    return proper
 
 
 def _hypotheses(a: Prepared, b: Prepared, keep: int) -> list[tuple[float, Similarity]]:
