@@ -141,6 +141,18 @@ def scores(pairs: list[dict]) -> list[dict]:
     return rows
 
 
+def kept_surface(pairs: list[dict], tolerance: float = 0.1) -> str:
+    """Re-triangulated recall with and without the copies whose area (over the diagonal squared, so
+    any scale) changed by more than `tolerance`: a decimation that dropped that much of the surface."""
+    truth = [p for p in pairs if p["truth"] == "retriangulated"]
+    kept = [p for p in truth if abs(p["area_ratio"] - 1.0) <= tolerance]
+    hits = sum(p["got"] == "retriangulated" for p in truth)
+    kept_hits = sum(p["got"] == "retriangulated" for p in kept)
+    return (f"retriangulated recall {hits}/{len(truth)}; without the {len(truth) - len(kept)} copies whose"
+            f" area changed by more than {tolerance:.0%}: {kept_hits}/{len(kept)}"
+            f" ({kept_hits / len(kept) if kept else float('nan'):.3f})")
+
+
 def calibration(pairs: list[dict]) -> list[dict]:
     edges = [0.5, 0.6, 0.7, 0.8, 0.9, 0.99, 1.0001]
     rows = []
@@ -268,6 +280,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{len(bases)} bases ({n_real} realworld), {len(pairs)} pairs;"
           f" dropped as related to an earlier base: {dropped or 'none'}")
     print(table(scores(pairs), title="\nper relation (pairs verified or missed by the lookup)"))
+    print(kept_surface(pairs))
     by_kind = defaultdict(list)
     for p in pairs:
         if p["truth"] != "similar" or p["kind"] == "negative":

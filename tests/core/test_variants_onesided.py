@@ -136,3 +136,17 @@ def test_two_coarse_blobs_at_one_resolution_are_only_similar(seeds) -> None:
     ev = relate(Prepared(hull(seeds[0])), Prepared(hull(seeds[1])))
     assert ev.relation == "similar"
     assert ev.slack is not None and ev.vertex_gap is not None and ev.vertex_gap > 0.015
+
+
+def test_cover_margin_by_hand_and_as_a_lower_bound_of_the_side_margin() -> None:
+    from app.core.variants.onesided import COVER_FLOOR, COVER_TOL, cover_margin, side, slack
+
+    other = np.linspace(0.0, 0.1, 101)  # its 90 % quantile is 0.09
+    assert cover_margin(other, 0.05, 0.05) == pytest.approx(0.09 / COVER_FLOOR)  # no coarser: the floor
+    s = slack(0.3, 0.1)  # edges 3 times the other's: the capped edge is all slack
+    assert s == pytest.approx(0.15)
+    assert cover_margin(other, 0.3, 0.1) == pytest.approx(0.09 / max(COVER_FLOOR, COVER_TOL * s))
+    vertices = np.full(50, 0.001)  # vertices on the surface: the coverage term is the whole margin
+    assert side(vertices, other, 0.05, 0.05)[4] == pytest.approx(cover_margin(other, 0.05, 0.05))
+    far = np.full(50, 0.2)  # vertices off the surface raise the margin above the bound
+    assert side(far, other, 0.05, 0.05)[4] > cover_margin(other, 0.05, 0.05)

@@ -87,19 +87,61 @@ def icp(
 ) -> tuple[Similarity, float]:
     """Refine x -> start @ x (source (n, 3), target (m, 3) indexed by tree) by trimmed ICP keeping the
     handedness of `start`; returns the similarity and the final mean distance of the kept pairs."""
-    current = Similarity(1.0, start, np.zeros(3))
-    cost = np.inf
+    start_fit = Similarity(1.0, start, np.zeros(3))
+    fits, costs = icp_batch(source, tree, target, [start_fit], iterations, with_scale)
+    return fits[0], float(costs[0])
+
+
+def icp_batch(
+    source: np.ndarray, tree: cKDTree, target: np.ndarray, starts: list[Similarity],
+    iterations: int = ICP_ITERATIONS, with_scale: bool = False,
+) -> tuple[list[Similarity], np.ndarray]:
+    """Trimmed ICP from several starting similarities at once (one k-d tree query per round for all
+    of them), each keeping its handedness and stopping on its own when it converges.
+    source (n, 3), target (m, 3) indexed by tree; returns the fits and their costs (h,): the mean
+    distance of the kept pairs in the last round."""
+    h, n = len(starts), len(source)
+    rot = np.array([s.rotation for s in starts], dtype=float)  # (h, 3, 3)
+    scale = np.array([s.scale for s in starts], dtype=float)  # (h,)
+    shift = np.array([s.translation for s in starts], dtype=float)  # (h, 3)
+    mirrored = np.linalg.det(rot) < 0
+    cost = np.full(h, np.inf)
+    active = np.arange(h)
+    kth = int(TRIM * (n - 1))
     for _ in range(iterations):
-        moved = current.apply(source)
-        dist, idx = tree.query(moved, workers=1)
-        keep = dist <= np.partition(dist, int(TRIM * (len(dist) - 1)))[int(TRIM * (len(dist) - 1))]
-        new_cost = float(dist[keep].mean())
-        current = umeyama(source[keep], target[idx[keep]], mirrored=current.mirrored, with_scale=with_scale)
-        if cost - new_cost < 1e-4 * new_cost:  # converged (coordinates have unit RMS radius)
-            cost = min(cost, new_cost)
+        if not active.size:
             break
-        cost = new_cost
-    return current, cost
+        moved = scale[active, None, None] * source[None] @ rot[active].transpose(0, 2, 1)
+        moved += shift[active, None]  # (a, n, 3)
+        dist, idx = tree.query(moved.reshape(-1, 3), workers=1)
+        dist, idx = dist.reshape(len(active), n), idx.reshape(len(active), n)
+        keep = np.argpartition(dist, kth, axis=1)[:, : kth + 1]  # (a, kth + 1) the closest 90 % of pairs
+        new_cost = np.take_along_axis(dist, keep, axis=1).mean(axis=1)
+        r, s, t = umeyama_batch(source[keep], target[np.take_along_axis(idx, keep, axis=1)], mirrored[active],
+                                with_scale)
+        rot[active], scale[active], shift[active] = r, s, t
+        done = cost[active] - new_cost < 1e-4 * new_cost  # converged (coordinates have unit RMS radius)
+        cost[active] = np.where(done, np.minimum(cost[active], new_cost), new_cost)
+        active = active[~done]
+    return [Similarity(float(scale[i]), rot[i], shift[i]) for i in range(h)], cost
+
+
+def umeyama_batch(
+    src: np.ndarray, dst: np.ndarray, mirrored: np.ndarray, with_scale: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """umeyama() for h point sets at once: src, dst (h, n, 3), mirrored (h,) bool -> rotations (h, 3, 3),
+    scales (h,), translations (h, 3)."""
+    mu_s, mu_d = src.mean(axis=1), dst.mean(axis=1)  # (h, 3)
+    xs, xd = src - mu_s[:, None], dst - mu_d[:, None]
+    u, sig, vt = np.linalg.svd(np.einsum("hni,hnj->hij", xd, xs))
+    d = np.ones((len(src), 3))
+    d[(np.linalg.det(u @ vt) < 0) != mirrored, 2] = -1.0
+    rotation = (u * d[:, None, :]) @ vt
+    var = (xs**2).sum(axis=(1, 2))
+    scale = np.ones(len(src))
+    if with_scale:
+        scale = np.where(var > 0, (sig * d).sum(axis=1) / np.maximum(var, 1e-300), 1.0)
+    return rotation, scale, mu_d - scale[:, None] * np.einsum("hij,hj->hi", rotation, mu_s)
 
 
 def umeyama(src: np.ndarray, dst: np.ndarray, mirrored: bool, with_scale: bool = True) -> Similarity:

@@ -28,7 +28,7 @@ import numpy as np
 
 from app.core.meshdata import Mesh
 
-VERTEX_TOL = 0.4  # 99 % of the lying mesh's vertices within 0.4 slack of the other surface ...
+VERTEX_TOL = 0.3  # 99 % of the lying mesh's vertices within 0.3 slack of the other surface ...
 VERTEX_FLOOR = 0.015  # ... or 1.5 % of the diagonal
 VERTEX_MAX = 0.6  # every vertex within 0.6 slack ...
 VERTEX_MAX_FLOOR = 0.02  # ... or 2 %
@@ -66,10 +66,11 @@ def mean_edge(mesh: Mesh) -> float:
     return float(np.linalg.norm(tri - tri[:, [1, 2, 0]], axis=2).mean())
 
 
-def vertex_subset(mesh: Mesh) -> np.ndarray:
-    """(<= MAX_VERTICES, 3) the vertices that some face uses, an even stride through a large mesh."""
+def vertex_subset(mesh: Mesh, limit: int | None = None) -> np.ndarray:
+    """(<= limit or MAX_VERTICES, 3) the vertices that some face uses, an even stride through a large
+    mesh."""
     used = mesh.vertices[np.unique(mesh.faces)]
-    return used[:: max(1, -(-len(used) // MAX_VERTICES))]
+    return used[:: max(1, -(-len(used) // (limit or MAX_VERTICES)))]
 
 
 def slack(edge: float, other_edge: float) -> float:
@@ -94,6 +95,12 @@ def side(
     if len(vertex_dist) < MIN_VERTICES:
         margin = float("inf")
     return edge, s, gap, uncovered, margin
+
+
+def cover_margin(other_dist: np.ndarray, edge: float, other_edge: float) -> float:
+    """side()'s coverage term alone, a lower bound of its margin (the vertex terms can only raise it):
+    other_dist (m,) the other's surface samples to the lying mesh, relative to the diagonal."""
+    return float(np.quantile(other_dist, 0.9)) / max(COVER_FLOOR, COVER_TOL * slack(edge, other_edge))
 
 
 def lies_on(

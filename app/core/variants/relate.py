@@ -22,8 +22,8 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from app.core.variants.align import Similarity, hypotheses, icp, to_world, umeyama
-from app.core.variants.onesided import lies_on, vertex_subset
+from app.core.variants.align import ICP_ITERATIONS, Similarity, hypotheses, icp_batch, to_world, umeyama
+from app.core.variants.onesided import cover_margin, lies_on, vertex_subset
 from app.core.variants.prepared import Prepared, face_keys
 
 RELATIONS = ("identical", "moved", "rescaled", "mirrored", "retriangulated", "part_of", "contains", "similar")
@@ -32,13 +32,22 @@ CHAMFER_MAX = 0.006  # same surface: mean surface distance below 0.6 % of the di
 HAUSDORFF_MAX = 0.06  # ... and no point farther than 6 % (a punched hole, a decimated corner)
 COVER_TOLERANCE = 0.01  # a sample is "covered" by the other surface within 1 % of the diagonal
 IDENTITY_TOL = 1e-4  # rotation angle (rad), |log scale| and translation / diagonal read as "none"
-COARSE_POINTS = 256  # ICP on a subsample to rank the hypotheses, then the full samples on the best
+COARSE_POINTS = 128  # ICP on a subsample to rank the hypotheses, then more points on the best
 FINE_POINTS = 1024
+SCREEN_POINTS = 64  # past 2 SCREEN_KEEP hypotheses, a 3-round ICP on this many points screens them ...
+SCREEN_KEEP = 2  # ... and the best this many of each handedness go on (the 8 sign choices: 4) ...
+SCREEN_KEEP_EXACT = 4  # ... or this many when the face counts allow the same triangles (all 8 kept)
 MIRROR_MARGIN = 0.8  # an improper fit wins only when its ICP cost is 20 % lower
-REFINE = 2  # hypotheses refined per handedness
+REFINE = 2  # hypotheses of each handedness polished on FINE_POINTS when the quick decision is not made
+QUICK_POINTS = 256  # the best fit polished (QUICK_ROUNDS) and the distances measured on this many first ...
+QUICK_ROUNDS = 8
+QUICK_MARGIN = 4.0  # ... and four times past every tolerance there is `similar` without more work
 EXACT_ROUNDS = 4
 EXACT_TOL = 1e-4  # same triangles: every vertex within this fraction of the diagonal of its partner
-MAX_PARTS = 8  # objects of a multi-object mesh verified one by one
+MAX_PARTS = 8  # objects of a multi-object mesh verified one by one ...
+PART_RADIUS = 1.0  # ... against the objects of the other whose fingerprints are this close (the lookup's
+# radius, collection.RADIUS: a decimation to 10 % moves its fingerprint up to about 0.9), the nearest
+PART_TRIES = 2  # this many of them tried before an object is given up
 ONE_SIDED_CHAMFER = 0.06  # past this symmetric mean distance the one-sided test is not tried
 
 
@@ -88,39 +97,83 @@ def relate(a: Prepared, b: Prepared) -> Evidence:
 
 
 def verify(a: Prepared, b: Prepared) -> Evidence:
-    """Whole surface against whole surface: the exact relations, retriangulated or similar."""
+    """Whole surface against whole surface: the exact relations, retriangulated or similar.
+
+    The axis hypotheses are fitted on a few hundred points (screened first on fewer, more of them kept
+    when the face counts allow the same triangles); unless the same triangles fit, the best fit is
+    polished with scale on those points and the surface distances are measured on QUICK_POINTS
+    samples: a pair far from any relation there is decided `similar`. Only the others get the fit
+    polished on FINE_POINTS and the distances on the full samples."""
     exact = _exact(a, b, Similarity(1.0, np.eye(3), np.zeros(3)))  # in place: no search needed
     if exact is not None:
         return _exact_evidence(b, *exact)
     fa, fb = a.frame, b.frame
-    coarse = a.normalised_samples[:: max(1, len(a.normalised_samples) // COARSE_POINTS)]
-    fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
-    ranked: list[tuple[float, Similarity]] = []
-    for start in hypotheses(fa, fb):
-        fit, cost = icp(coarse, b.normalised_tree, b.normalised_samples, start, iterations=10)
-        ranked.append((cost, fit))
-    ranked.sort(key=lambda r: (r[1].mirrored, r[0]))  # proper first: a symmetric shape is not "mirrored"
+    same_count = _face_counts_match(a, b)
+    ranked = _hypotheses(a, b, SCREEN_KEEP_EXACT if same_count else SCREEN_KEEP)
     best_cost = min(r[0] for r in ranked)
-    for cost, fit in ranked:  # the same triangles under any hypothesis about as good as the best
+    for cost, fit in ranked if same_count else []:  # the same triangles under a fit near the best
         if cost <= 2.0 * best_cost + 1e-3:
             exact = _exact(a, b, to_world(fa, fb, fit))
             if exact is not None:
                 return _exact_evidence(b, *exact)
-    refined: list[tuple[float, Similarity]] = []
-    for mirrored in (False, True):
-        for _, rough in [r for r in ranked if r[1].mirrored == mirrored][:REFINE]:
-            fit, cost = icp(fine, b.normalised_tree, b.normalised_samples, rough.rotation, with_scale=True)
-            refined.append((cost, to_world(fa, fb, fit)))
-    refined.sort(key=lambda r: r[0])
-    for _, sim in refined[:1]:  # the best fit, polished on the vertices when they are the same
-        exact = _exact(a, b, sim)
-        if exact is not None:
-            return _exact_evidence(b, *exact)
-    proper = min((r for r in refined if not r[1].mirrored), key=lambda r: r[0])
-    improper = min((r for r in refined if r[1].mirrored), key=lambda r: r[0])
-    # a (nearly) mirror-symmetric shape fits both ways: call it mirrored only when clearly better
-    best = improper if improper[0] < MIRROR_MARGIN * proper[0] else proper
-    return _evidence(a, b, best[1])
+    # the best proper coarse fit, and the best mirrored one only where it competes (see MIRROR_MARGIN),
+    # polished with scale on a few hundred points for the quick decision
+    proper = next(r for r in ranked if not r[1].mirrored)
+    rough = [proper[1]] + [r[1] for r in ranked if r[1].mirrored and r[0] < proper[0]][:1]
+    quick_points = a.normalised_samples[:: max(1, len(a.normalised_samples) // QUICK_POINTS)]
+    _, quick_fit = _polished(a, b, quick_points, rough, QUICK_ROUNDS)
+    quick = _evidence(a, b, quick_fit, points=QUICK_POINTS)
+    if quick.relation == "similar" and quick.confidence >= 1.0 - 0.5 / QUICK_MARGIN:
+        return quick  # far from any relation on a subsample (margin >= QUICK_MARGIN): decided
+    # undecided: the best REFINE of each handedness polished on more points, from their turns alone
+    # (the centroids already meet at 0)
+    rough = [r[1] for r in ranked if not r[1].mirrored][:REFINE]
+    rough += [r[1] for r in ranked if r[1].mirrored][:REFINE]
+    fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
+    cost, best = _polished(a, b, fine, [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough])
+    exact = _exact(a, b, best) if same_count else None  # the same vertices after all?
+    if exact is not None:
+        return _exact_evidence(b, *exact)
+    return _evidence(a, b, best)
+
+
+def _face_counts_match(a: Prepared, b: Prepared) -> bool:
+    """Whether a and b may have the same triangles (a format's rounding may join a few vertices)."""
+    return 0.98 * b.mesh.n_faces <= a.mesh.n_faces <= 1.02 * b.mesh.n_faces + 2
+
+
+def _polished(
+    a: Prepared, b: Prepared, points: np.ndarray, rough: list[Similarity], rounds: int = ICP_ITERATIONS
+) -> tuple[float, Similarity]:
+    """ICP with scale of `points` (a's, normalised) from each rough fit; the best as (cost, similarity
+    between the meshes' own coordinates), a mirrored one only when clearly better (MIRROR_MARGIN)."""
+    fits, costs = icp_batch(points, b.normalised_tree, b.normalised_samples, rough, rounds, with_scale=True)
+    refined = list(zip(costs.tolist(), [to_world(a.frame, b.frame, f) for f in fits], strict=True))
+    proper = min((r for r in refined if not r[1].mirrored), key=lambda r: r[0], default=None)
+    improper = min((r for r in refined if r[1].mirrored), key=lambda r: r[0], default=None)
+    if proper is None or (improper is not None and improper[0] < MIRROR_MARGIN * proper[0]):
+        assert improper is not None
+        return improper  # a (nearly) mirror-symmetric shape fits both ways: mirrored only when clearly
+    return proper
+
+
+def _hypotheses(a: Prepared, b: Prepared, keep: int) -> list[tuple[float, Similarity]]:
+    """(ICP cost, fit in normalised coordinates) for each axis hypothesis, proper ones first, each
+    handedness by cost. More than 2 `keep` hypotheses are screened on a few points first, and only
+    the best `keep` of each handedness go on."""
+    starts = [Similarity(1.0, r, np.zeros(3)) for r in hypotheses(a.frame, b.frame)]
+    pts = a.normalised_samples
+    if len(starts) > 2 * keep:
+        screen = pts[:: max(1, len(pts) // SCREEN_POINTS)]
+        fits, costs = icp_batch(screen, b.normalised_tree, b.normalised_samples, starts, iterations=3)
+        order = np.argsort(costs)
+        starts = [fits[i] for i in order if not fits[i].mirrored][:keep] + [
+            fits[i] for i in order if fits[i].mirrored][:keep]
+    coarse = pts[:: max(1, len(pts) // COARSE_POINTS)]
+    fits, costs = icp_batch(coarse, b.normalised_tree, b.normalised_samples, starts, iterations=10)
+    ranked = list(zip(costs.tolist(), fits, strict=True))
+    ranked.sort(key=lambda r: (r[1].mirrored, r[0]))  # proper first: a symmetric shape is not "mirrored"
+    return ranked
 
 
 def _exact(a: Prepared, b: Prepared, guess: Similarity) -> tuple[Similarity, float] | None:
@@ -128,7 +181,7 @@ def _exact(a: Prepared, b: Prepared, guess: Similarity) -> tuple[Similarity, flo
     triangles are b's triangles under it: every vertex of a within EXACT_TOL of a vertex of b,
     and a's triangles, through that vertex map, exactly b's set of triangles. The map may join two of
     a's vertices that a file format's rounding made one (a weld), never two distinct ones."""
-    if not 0.98 * b.mesh.n_faces <= a.mesh.n_faces <= 1.02 * b.mesh.n_faces + 2:
+    if not _face_counts_match(a, b):
         return None
     va, vb = a.mesh.vertices, b.mesh.vertices
     fit = guess
@@ -167,22 +220,33 @@ def _exact_evidence(b: Prepared, sim: Similarity, residual: float) -> Evidence:
                     True, sim.matrix().tolist())
 
 
-def _evidence(a: Prepared, b: Prepared, sim: Similarity, one_sided: bool = True) -> Evidence:
+def _evidence(
+    a: Prepared, b: Prepared, sim: Similarity, one_sided: bool = True, points: int | None = None
+) -> Evidence:
+    """The surface distances under `sim` (a's and b's samples, or the first `points` of them: the
+    samples are drawn independently, so a prefix is a random subsample), and the one-sided test
+    (on a subsample, skipped when the coverage alone puts it QUICK_MARGIN past its tolerance: the
+    margin said is then that bound)."""
     diag = b.diagonal
-    ab = b.distance_to(sim.apply(a.samples[0]))  # (N,) a's samples to b's surface
-    ba = a.distance_to(_inverse(sim).apply(b.samples[0])) * sim.scale  # (N,) b's samples to a's, b's units
+    ab = b.distance_to(sim.apply(a.samples[0][:points]))  # (N,) a's samples to b's surface
+    ba = a.distance_to(_inverse(sim).apply(b.samples[0][:points])) * sim.scale  # (N,) b's to a's, b's units
     chamfer = 0.5 * float(ab.mean() + ba.mean()) / diag
     hausdorff = float(max(ab.max(), ba.max())) / diag
     forward = float((ab <= COVER_TOLERANCE * diag).mean())
     reverse = float((ba <= COVER_TOLERANCE * diag).mean())
     margin = max(chamfer / CHAMFER_MAX, hausdorff / HAUSDORFF_MAX)
     extra: dict = {}
+    a_edge, b_edge = a.mean_edge * sim.scale / diag, b.mean_edge / diag
+    if points is not None and one_sided and margin >= 1.0 and chamfer < ONE_SIDED_CHAMFER:
+        # on a subsample, a coverage far outside both directions' tolerances decides without the vertices
+        bound = min(cover_margin(ba / diag, a_edge, b_edge), cover_margin(ab / diag, b_edge, a_edge))
+        if bound >= QUICK_MARGIN:
+            one_sided, margin = False, min(margin, bound)
     if one_sided and margin >= 1.0 and chamfer < ONE_SIDED_CHAMFER:  # a coarser copy on the finer surface?
         inverse = _inverse(sim)
         on = lies_on(
-            b.distance_to(sim.apply(vertex_subset(a.mesh))) / diag, ba / diag, a.mean_edge * sim.scale / diag,
-            a.distance_to(inverse.apply(vertex_subset(b.mesh))) * sim.scale / diag, ab / diag,
-            b.mean_edge / diag,
+            b.distance_to(sim.apply(vertex_subset(a.mesh, points))) / diag, ba / diag, a_edge,
+            a.distance_to(inverse.apply(vertex_subset(b.mesh, points))) * sim.scale / diag, ab / diag, b_edge,
         )
         extra = {"lies_on_other": on.a_on_b, "resolution": on.resolution, "slack": on.slack,
                  "vertex_gap": on.vertex_gap, "uncovered": on.uncovered}
@@ -214,21 +278,29 @@ def _inverse(sim: Similarity) -> Similarity:
 def _parts_in(small: Prepared, big: Prepared) -> Evidence | None:
     """Every object of `small` matched to an object of `big` (whole-surface relation other than
     similar); the evidence of the largest object's match, with the copies of it that `big` holds."""
-    first: Evidence | None = None
-    for part in small.parts[:MAX_PARTS]:
-        order = np.argsort([np.linalg.norm(part.fingerprint - o.fingerprint) for o in big.parts])
-        matches = []
-        for j in order[: 2 * MAX_PARTS]:
-            ev = verify(part, big.parts[int(j)])
+    parts = small.parts[:MAX_PARTS]
+    gaps = np.linalg.norm(np.array([p.fingerprint for p in parts])[:, None]
+                          - np.array([o.fingerprint for o in big.parts])[None], axis=2)  # (parts, objects)
+    if not (gaps <= PART_RADIUS).any(axis=1).all():
+        return None  # an object with no object of `big` near enough to be related: nothing to verify
+    found: dict[int, list[Evidence]] = {}
+    for i in np.argsort(-gaps.min(axis=1)):  # the object least likely to match first: a miss ends it
+        row = gaps[i]
+        order = [j for j in np.argsort(row) if row[j] <= PART_RADIUS]  # farther: no relation is possible
+        matches: list[Evidence] = []
+        for n, j in enumerate(order[: 2 * MAX_PARTS]):
+            if not matches and n >= PART_TRIES:
+                break  # its nearest objects are not it: a farther one will not be either
+            ev = verify(parts[i], big.parts[int(j)])
             if ev.relation != "similar":
                 matches.append(ev)
             elif matches:
                 break  # candidates come nearest first: the copies are together at the front
         if not matches:
             return None
-        if first is None:
-            first = Evidence(**{**matches[0].to_dict(), "copies": len(matches)})
-    assert first is not None
+        found[int(i)] = matches
+    matches = found[0]  # the evidence of the largest object (objects come largest first)
+    first = Evidence(**{**matches[0].to_dict(), "copies": len(matches)})
     # coverage against the whole of `big`, as the whole-surface check measures it
     placed = Similarity(first.scale, np.asarray(first.transform)[:3, :3] / first.scale,
                         np.asarray(first.transform)[:3, 3])

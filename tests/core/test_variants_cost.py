@@ -1,0 +1,110 @@
+"""The rules that keep the verification cheap: a pair far from any relation on a subsample is decided
+there (the fine fit and the full samples are not used), objects are verified only against objects
+whose fingerprints are near, a few at most; none of them loses a true relation."""
+
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+import pytest
+import trimesh
+
+from app.core.mesh import Mesh
+from app.core.variants import Prepared, relate
+from app.core.variants.onesided import vertex_subset
+
+R = importlib.import_module("app.core.variants.relate")  # the module, not the function it exports
+
+
+def _hull(seed: int, n: int = 80) -> Mesh:
+    points = np.random.default_rng(seed).normal(size=(n, 3)) * [1.0, 0.6, 0.35]
+    tm = trimesh.convex.convex_hull(points)
+    return Mesh(np.asarray(tm.vertices, float), np.asarray(tm.faces, np.int64))
+
+
+def _plate(meshes: list[Mesh]) -> Mesh:
+    step = 3.0 * max(float(np.ptp(m.vertices, axis=0).max()) for m in meshes)
+    v = [m.vertices + [i * step, 0, 0] for i, m in enumerate(meshes)]
+    offsets = np.cumsum([0] + [m.n_vertices for m in meshes[:-1]])
+    return Mesh(np.vstack(v), np.vstack([m.faces + o for m, o in zip(meshes, offsets, strict=True)]))
+
+
+class Count:
+    """Wraps a function of the relate module and records its calls: keywords, and the length of the
+    first argument when it is an array (the points an ICP fits)."""
+
+    def __init__(self, monkeypatch: pytest.MonkeyPatch, name: str) -> None:
+        self.calls: list[dict] = []
+        real = getattr(R, name)
+
+        def wrapped(*args, **kwargs):
+            self.calls.append({**kwargs, "n": len(args[0]) if isinstance(args[0], np.ndarray) else None})
+            return real(*args, **kwargs)
+
+        monkeypatch.setattr(R, name, wrapped)
+
+
+def test_a_pair_far_from_any_relation_is_decided_on_the_subsample(monkeypatch) -> None:
+    """Must not match: a thin rod against a ball (decided quickly), two different random hulls."""
+    fits = Count(monkeypatch, "icp_batch")
+    evidence = Count(monkeypatch, "_evidence")
+    rod = trimesh.creation.cylinder(radius=0.05, height=2.0, sections=24)
+    ball = trimesh.creation.icosphere(subdivisions=2)
+    a = Mesh(np.asarray(rod.vertices), np.asarray(rod.faces, np.int64))
+    ev = relate(Prepared(a), Prepared(Mesh(np.asarray(ball.vertices), np.asarray(ball.faces, np.int64))))
+    assert ev.relation == "similar"
+    assert ev.confidence >= 1.0 - 0.5 / R.QUICK_MARGIN  # its margin on the subsample
+    assert fits.calls and max(c["n"] for c in fits.calls) <= R.QUICK_POINTS  # no fine fit made
+    assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS]  # the full samples unused
+    # two different hulls are nearer than that: verified in full, and still only similar
+    assert relate(Prepared(_hull(8)), Prepared(_hull(7))).relation == "similar"
+
+
+def test_a_true_retriangulation_gets_the_fine_fit_and_the_full_samples(monkeypatch) -> None:
+    evidence = Count(monkeypatch, "_evidence")
+    fits = Count(monkeypatch, "icp_batch")
+    hull = _hull(7)
+    v, f = trimesh.remesh.subdivide(hull.vertices, hull.faces)
+    ev = relate(Prepared(Mesh(v, f)), Prepared(hull))
+    assert ev.relation == "retriangulated" and ev.chamfer < 1e-3
+    assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS, None]
+    assert max(c["n"] for c in fits.calls) > R.QUICK_POINTS  # the fine fit was made
+
+
+def test_objects_far_in_fingerprint_are_not_verified(monkeypatch) -> None:
+    """A hull against a plate of a rod and a ball: no object of the plate is near it in fingerprint,
+    so no object pair is verified (and the answer is `similar`)."""
+    rod = trimesh.creation.cylinder(radius=0.05, height=2.0, sections=24)
+    ball = trimesh.creation.icosphere(subdivisions=2)
+    plate = _plate([Mesh(np.asarray(t.vertices), np.asarray(t.faces, np.int64)) for t in (rod, ball)])
+    small, big = Prepared(_hull(7)), Prepared(plate)
+    gaps = [np.linalg.norm(small.fingerprint - o.fingerprint) for o in big.parts]
+    assert len(big.parts) == 2 and min(gaps) > R.PART_RADIUS  # the premise of the test
+    verified = Count(monkeypatch, "verify")
+    assert relate(small, big).relation == "similar"
+    assert len(verified.calls) == 1  # the whole surfaces only
+
+
+def test_an_object_is_given_up_after_its_nearest_few(monkeypatch) -> None:
+    """A hull against a plate of five other hulls (fingerprints near, none the same): at most
+    PART_TRIES of them are verified; the same plate with the hull on it is still `contains`."""
+    others = [_hull(s) for s in (20, 21, 22, 23, 24)]
+    big = Prepared(_plate(others))
+    small = Prepared(_hull(7))
+    gaps = [np.linalg.norm(small.fingerprint - o.fingerprint) for o in big.parts]
+    assert sum(g <= R.PART_RADIUS for g in gaps) > R.PART_TRIES  # more candidates than are tried
+    verified = Count(monkeypatch, "verify")
+    assert relate(small, big).relation == "similar"
+    assert len(verified.calls) == 1 + R.PART_TRIES
+    ev = relate(Prepared(_plate([*others, _hull(7), _hull(7)])), small)
+    assert (ev.relation, ev.copies) == ("contains", 2)
+
+
+def test_vertex_subset_is_an_even_stride_within_the_limit() -> None:
+    mesh = _hull(7, n=400)
+    used = np.unique(mesh.faces).size
+    assert len(vertex_subset(mesh)) == used  # under MAX_VERTICES: every used vertex
+    sub = vertex_subset(mesh, 50)
+    assert 25 <= len(sub) <= 50
+    assert {tuple(p) for p in sub} <= {tuple(p) for p in mesh.vertices}
