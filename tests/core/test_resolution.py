@@ -485,13 +485,14 @@ def test_a_target_of_zero_or_less_leaves_the_mesh_alone():
 def test_a_fine_mesh_is_simplified_with_the_target_and_tolerance_given(monkeypatch, target, tolerance):
     calls = []
 
-    def spy(mesh, target_vertices, tol=1.5, prefilter_length=0.0):
-        calls.append((mesh.n_vertices, target_vertices, tol, prefilter_length))
+    def spy(mesh, target_vertices, tol=1.5, prefilter_length=0.0, prefilter_ramp=(0.0, 0.0)):
+        calls.append((mesh.n_vertices, target_vertices, tol, prefilter_length, prefilter_ramp))
         return mesh
 
     monkeypatch.setattr(resolution, "simplify", spy)
-    resolution.to_resolution(_icosahedron(), target, tolerance=tolerance, prefilter_length=0.25)
-    assert calls == [(12, target, tolerance, 0.25)]
+    resolution.to_resolution(_icosahedron(), target, tolerance=tolerance, prefilter_length=0.25,
+                             prefilter_ramp=(2.0, 5.0))
+    assert calls == [(12, target, tolerance, 0.25, (2.0, 5.0))]
 
 
 def test_an_unknown_subdivision_is_refused_with_the_known_ones():
