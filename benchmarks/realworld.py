@@ -53,9 +53,9 @@ def own_peak_mb() -> float:
 
 
 def legacy_simplify(mesh, target_vertices: int, tolerance: float = 1.5, prefilter_length: float = 0.0,
-                    max_passes: int = 3):
+                    prefilter_ramp: tuple[float, float] = (0.0, 0.0), max_passes: int = 3):
     """resolution.simplify before issue 10 (agg=3 only, at the mesh's own scale, no low-pass): the
-    baseline. Same signature as resolution.simplify, whose caller passes the low-pass length."""
+    baseline. Same signature as resolution.simplify, whose caller passes the low-pass and its ramp."""
     import fast_simplification
     import numpy as np
 
