@@ -10,19 +10,8 @@ import trimesh
 from app.core.mesh import Mesh, load_mesh
 from app.core.variants import Prepared, relate
 from tests.conftest import dataset_or_skip
-
-
-def _hull(seed: int, n: int = 80) -> Mesh:
-    points = np.random.default_rng(seed).normal(size=(n, 3)) * [1.0, 0.6, 0.35]
-    tm = trimesh.convex.convex_hull(points)
-    return Mesh(np.asarray(tm.vertices, float), np.asarray(tm.faces, np.int64))
-
-
-def _plate(meshes: list[Mesh]) -> Mesh:
-    step = 3.0 * max(float(np.ptp(m.vertices, axis=0).max()) for m in meshes)
-    v = [m.vertices + [i * step, 0, 0] for i, m in enumerate(meshes)]
-    offsets = np.cumsum([0] + [m.n_vertices for m in meshes[:-1]])
-    return Mesh(np.vstack(v), np.vstack([m.faces + o for m, o in zip(meshes, offsets, strict=True)]))
+from tests.variant_meshes import hull as _hull
+from tests.variant_meshes import plate as _plate
 
 
 def _relate(a: Mesh, b: Mesh):

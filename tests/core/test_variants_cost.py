@@ -13,21 +13,10 @@ import trimesh
 from app.core.mesh import Mesh
 from app.core.variants import Prepared, relate
 from app.core.variants.onesided import vertex_subset
+from tests.variant_meshes import hull as _hull
+from tests.variant_meshes import plate as _plate
 
 R = importlib.import_module("app.core.variants.relate")  # the module, not the function it exports
-
-
-def _hull(seed: int, n: int = 80) -> Mesh:
-    points = np.random.default_rng(seed).normal(size=(n, 3)) * [1.0, 0.6, 0.35]
-    tm = trimesh.convex.convex_hull(points)
-    return Mesh(np.asarray(tm.vertices, float), np.asarray(tm.faces, np.int64))
-
-
-def _plate(meshes: list[Mesh]) -> Mesh:
-    step = 3.0 * max(float(np.ptp(m.vertices, axis=0).max()) for m in meshes)
-    v = [m.vertices + [i * step, 0, 0] for i, m in enumerate(meshes)]
-    offsets = np.cumsum([0] + [m.n_vertices for m in meshes[:-1]])
-    return Mesh(np.vstack(v), np.vstack([m.faces + o for m, o in zip(meshes, offsets, strict=True)]))
 
 
 class Count:

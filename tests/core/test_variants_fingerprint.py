@@ -10,13 +10,12 @@ from app.core.mesh import Mesh
 from app.core.variants import fingerprint
 from app.core.variants.index import FingerprintIndex
 from app.core.variants.surface import closest_on_triangles, moments, objects
+from tests.variant_meshes import hull
 
 
 def _hull(seed: int, n: int = 60) -> Mesh:
     """A random convex hull: no symmetry, so a mirror image is not a rotation of it."""
-    points = np.random.default_rng(seed).normal(size=(n, 3)) * [1.0, 0.6, 0.35]
-    tm = trimesh.convex.convex_hull(points)
-    return Mesh(np.asarray(tm.vertices, float), np.asarray(tm.faces, np.int64))
+    return hull(seed, n)
 
 
 def test_moments_of_a_unit_square_by_hand() -> None:

@@ -6,16 +6,13 @@ import asyncio
 import time
 
 import numpy as np
-import trimesh
 
 from app.services import variant_query
+from tests.variant_meshes import hull_trimesh
 
 
 def _hull(tmp_path, name: str, scale: float = 1.0, seed: int = 5) -> tuple[bytes, str]:
-    points = np.random.default_rng(seed).normal(size=(80, 3)) * [1.0, 0.6, 0.35]
-    tm = trimesh.convex.convex_hull(points)
-    tm.apply_scale(scale)
-    data = tm.export(file_type="stl")
+    data = hull_trimesh(seed, scale=scale).export(file_type="stl")
     (tmp_path / name).write_bytes(data)
     return data, str(tmp_path / name)
 

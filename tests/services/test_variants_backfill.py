@@ -17,13 +17,11 @@ from app.storage import models as models_repo
 from app.storage import variants as variants_repo
 from tests.conftest import make_settings
 from tests.pg_server import db_url, pg_admin_url  # noqa: F401 (fixtures)
+from tests.variant_meshes import hull_trimesh
 
 
 def _hull_bytes(scale: float = 1.0, seed: int = 5) -> bytes:
-    points = np.random.default_rng(seed).normal(size=(80, 3)) * [1.0, 0.6, 0.35]
-    tm = trimesh.convex.convex_hull(points)
-    tm.apply_scale(scale)
-    return tm.export(file_type="stl")
+    return hull_trimesh(seed, scale=scale).export(file_type="stl")
 
 
 def _stored_ready(ctx, data: bytes, name: str) -> int:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import trimesh
 
 from app.core.mesh import Mesh
 from app.services import catalog, ingestion, variants
@@ -15,12 +14,11 @@ from app.storage import models as models_repo
 from app.storage import variants as variants_repo
 from tests.conftest import make_settings
 from tests.pg_server import db_url, pg_admin_url  # noqa: F401 (fixtures)
+from tests.variant_meshes import hull_trimesh
 
 
 def _hull_bytes(scale: float = 1.0, seed: int = 5) -> tuple[bytes, Mesh]:
-    points = np.random.default_rng(seed).normal(size=(80, 3)) * [1.0, 0.6, 0.35]
-    tm = trimesh.convex.convex_hull(points)
-    tm.apply_scale(scale)
+    tm = hull_trimesh(seed, scale=scale)
     return tm.export(file_type="stl"), Mesh(np.asarray(tm.vertices), np.asarray(tm.faces, np.int64))
 
 
