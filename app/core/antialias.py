@@ -40,18 +40,13 @@ def ramp_length(length: float, ratio: float, ramp: tuple[float, float]) -> float
     return length * (ratio - start) / (full - start)
 
 
-def prefilter(
-    mesh: Mesh, target_vertices: int, length: float, ramp: tuple[float, float] = (0.0, 0.0),
-) -> Mesh:
-    """Implicit diffusion of the vertex positions over `length` canonical edge lengths (ramped with
-    the decimation ratio, `ramp_length`), for a mesh about to be decimated to `target_vertices`.
-    vertices (n, 3) move, faces (f, 3) are kept; a mesh not above the target, or a length of 0, is
-    returned as is."""
+def prefilter(mesh: Mesh, target_vertices: int, length: float) -> Mesh:
+    """Implicit diffusion of the vertex positions over `length` canonical edge lengths, for a mesh
+    about to be decimated to `target_vertices` (the caller ramps `length`: resolution.simplify, which
+    knows the input's ratio before any clustering). vertices (n, 3) move, faces (f, 3) are kept; a
+    mesh not above the target, or length 0, is returned as is."""
     n = mesh.n_vertices
-    if target_vertices <= 0 or n <= target_vertices:
-        return mesh
-    length = ramp_length(length, n / target_vertices, ramp)
-    if length <= 0:
+    if length <= 0 or target_vertices <= 0 or n <= target_vertices:
         return mesh
     t = length**2 * n / target_vertices
     c = edge_area_weights(mesh, capped=True)

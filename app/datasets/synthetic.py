@@ -19,6 +19,7 @@ from scipy.spatial.transform import Rotation
 from skimage.measure import marching_cubes
 
 from app.datasets.bodyplans import PLANS, Chain
+from app.datasets.folder import LABELS_FILE, read_labelled_folder
 
 GRID = 46  # voxels along the longest side (at least: thin limbs refine it)
 MAX_VERTICES = 3000  # finer marching-cubes output is decimated to this
@@ -179,19 +180,19 @@ def refine(src_dir: Path | str, out_dir: Path | str, min_vertices: int) -> Path:
     (DescribeParams.antialias_start/full): as generated, and refined past the ramp's end."""
     import trimesh
 
-    src, out = Path(src_dir), Path(out_dir)
-    labels = (src / "labels.csv").read_text()
-    for rel in [line.split(",")[0] for line in labels.splitlines()[1:] if line]:
-        mesh = trimesh.load(src / rel, force="mesh", process=False)
+    src, out = Path(src_dir).resolve(), Path(out_dir)  # the folder reader gives resolved paths
+    for item in read_labelled_folder(src):
+        rel = item.path.relative_to(src)
+        mesh = trimesh.load(item.path, force="mesh", process=False)
         if not isinstance(mesh, trimesh.Trimesh):
-            raise ValueError(f"{src / rel} is not one triangle mesh")
+            raise ValueError(f"{item.path} is not one triangle mesh")
         vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
         while len(vertices) < min_vertices:
             vertices, faces = trimesh.remesh.subdivide(vertices, faces)
         (out / rel).parent.mkdir(parents=True, exist_ok=True)
         text = trimesh.exchange.obj.export_obj(trimesh.Trimesh(vertices, faces, process=False))
         _atomic_write(out / rel, text)
-    _atomic_write(out / "labels.csv", labels)  # last: a folder with labels.csv is complete
+    _atomic_write(out / LABELS_FILE, (src / LABELS_FILE).read_text())  # last: labels.csv means complete
     return out
 
 

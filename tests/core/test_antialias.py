@@ -124,11 +124,20 @@ def test_an_empty_ramp_is_a_step():
     assert ramp_length(0.5, 8.0, (8.0, 8.0)) == 0.5
 
 
-def test_prefilter_ramps_by_its_own_ratio():
-    sphere = _sphere(5)  # 10,242 vertices to 1,000: ratio 10.242, 0.75 of the way from 4 to 12
-    ramped = prefilter(sphere, 1000, 0.5, ramp=(4.0, 12.0))
-    np.testing.assert_allclose(ramped.vertices, prefilter(sphere, 1000, 0.5 * 6.242 / 8).vertices, atol=1e-9)
-    assert prefilter(sphere, 1000, 0.5, ramp=(11.0, 12.0)) is sphere
+def test_simplify_ramps_the_low_pass_by_the_inputs_ratio(monkeypatch):
+    from app.core import resolution
+
+    lengths = []
+
+    def spy(mesh, target_vertices, length):
+        lengths.append(length)
+        return mesh
+
+    monkeypatch.setattr(resolution, "prefilter", spy)
+    sphere = _sphere(5)  # 10,242 vertices to 1,000: ratio 10.242, 0.78 of the way from 4 to 12
+    resolution.simplify(sphere, 1000, prefilter_length=0.5, prefilter_ramp=(4.0, 12.0))
+    resolution.simplify(sphere, 1000, prefilter_length=0.5, prefilter_ramp=(11.0, 12.0))
+    assert lengths == [pytest.approx(0.5 * 6.242 / 8), 0.0]
 
 
 def test_the_default_ramp_leaves_mild_decimations_alone_and_filters_scans():
