@@ -2,6 +2,7 @@
 
     python -m benchmarks.selfretrieval                      # the shipped defaults
     python -m benchmarks.selfretrieval --fill-holes 0       # another describe setting, same copies
+    python -m benchmarks.selfretrieval --antialias 0 --vocabulary DIR   # no low-pass, another vocabulary
     python -m benchmarks.selfretrieval --files 'oded__*' --jobs 2
 
 The realworld corpus has no labels, but each readable file can be asked to find itself. Two copies of
@@ -71,7 +72,8 @@ def scores(queries: np.ndarray, originals: np.ndarray) -> dict[str, float]:
             "top5": float(np.mean(rank <= 5))}
 
 
-def run(patterns: list[str], jobs: int, params_kwargs: dict, seed: int) -> dict:
+def run(patterns: list[str], jobs: int, params_kwargs: dict, seed: int,
+        vocabulary: Path | None = None) -> dict:
     from app.config import SHIPPED_VOCABULARY
     from app.core.vocabulary import EncodeParams, Vocabulary
 
@@ -81,7 +83,7 @@ def run(patterns: list[str], jobs: int, params_kwargs: dict, seed: int) -> dict:
                                          [seed] * len(entries)) if r is not None]
     failed = [r for r in described if "error" in r]
     ok = [r for r in described if "error" not in r]
-    vocab = Vocabulary.load(SHIPPED_VOCABULARY)
+    vocab = Vocabulary.load(vocabulary or SHIPPED_VOCABULARY)
     recorded = vocab.metadata.get("encode", {})
     fused = EncodeParams().with_encoding(recorded)
     lines = {}
@@ -91,6 +93,7 @@ def run(patterns: list[str], jobs: int, params_kwargs: dict, seed: int) -> dict:
             lines[(label, copy)] = scores(np.stack([vocab.encode(r[copy], enc) for r in ok]), originals)
     return {"files": len(ok), "refused": len(entries) - len(described), "failed": [(r["name"], r["error"])
             for r in failed], "describe": params_kwargs, "seed": seed,
+            "vocabulary": str(vocabulary or "shipped"),
             "lines": {f"{a} | {b}": v for (a, b), v in lines.items()}}
 
 
@@ -101,10 +104,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="the copies' random streams")
     ap.add_argument("--fill-holes", type=float, default=None, help="DescribeParams.fill_holes override")
     ap.add_argument("--smoothing", type=int, default=None, help="DescribeParams.smoothing override")
+    ap.add_argument("--antialias", type=float, default=None,
+                    help="DescribeParams.antialias override (0: none)")
+    ap.add_argument("--vocabulary", type=Path, default=None,
+                    help="a vocabulary directory (default: the shipped)")
     ap.add_argument("--name", default="selfretrieval", help="results/<name>.json")
     a = ap.parse_args(argv)
-    overrides = {k: v for k, v in (("fill_holes", a.fill_holes), ("smoothing", a.smoothing)) if v is not None}
-    result = run(a.files or [], a.jobs, overrides, a.seed)
+    overrides = {k: v for k, v in (("fill_holes", a.fill_holes), ("smoothing", a.smoothing),
+                                   ("antialias", a.antialias)) if v is not None}
+    result = run(a.files or [], a.jobs, overrides, a.seed, a.vocabulary)
     rows = [{"encoding | copy": name, "NN": v["NN"], "MRR": v["MRR"], "top 5": v["top5"]}
             for name, v in result["lines"].items()]
     print(table(rows))
