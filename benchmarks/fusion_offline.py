@@ -118,22 +118,22 @@ def ranks(d: np.ndarray) -> np.ndarray:
 def served_adaptive(
     col: Column, words: int, stored: float, rule: fusion.AdaptiveRule, n_cand: int
 ) -> np.ndarray:
-    """(q, N) as served: each query re-ranks the union of two fused-index searches (n_cand each)."""
+    """(q, N) as served (fusion.adaptive_rerank, brute-force L1 for the index); the shapes outside the
+    union of its two searches follow in the served order."""
     served = _masked(l1(col.queries, col.db), col)
     out = np.empty_like(served)
     for i, q in enumerate(col.queries):
-        first = np.argsort(served[i], kind="stable")[:n_cand]
-        first = first[np.isfinite(served[i, first])]
-        w, expanded = fusion.adaptive_query(q, col.db[first], words, stored, rule)
-        again = np.abs(col.db - expanded).sum(axis=1)
-        if col.left_out[i] >= 0:
-            again[col.left_out[i]] = np.inf
-        second = np.argsort(again, kind="stable")[:n_cand]
-        union = np.union1d(first, second[np.isfinite(again[second])])
-        final = fusion.adaptive_distances(expanded, w, col.db[union], words, stored)
-        rest = np.setdiff1d(np.argsort(served[i], kind="stable"), union, assume_unique=True)
-        order = np.concatenate([union[np.argsort(final, kind="stable")], rest])
-        out[i, order] = np.arange(len(order))  # a rank, as a distance
+
+        def search(vector: np.ndarray, n: int, i: int = i) -> np.ndarray:
+            d = np.abs(col.db - vector).sum(axis=1)
+            if col.left_out[i] >= 0:
+                d[col.left_out[i]] = np.inf
+            near = np.argsort(d, kind="stable")[:n]
+            return near[np.isfinite(d[near])]  # the left-out shape is not a candidate
+
+        ids, _ = fusion.adaptive_rerank(q, search, lambda j: (j, col.db[j]), words, stored, rule, n_cand)
+        rest = np.setdiff1d(np.argsort(served[i], kind="stable"), ids, assume_unique=True)
+        out[i, np.concatenate([ids, rest])] = np.arange(len(col.db))  # a rank, as a distance
     return _masked(out, col)
 
 

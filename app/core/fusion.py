@@ -17,6 +17,7 @@ Shape-DNA is compared with L1 here (Reuter used L2): the index has one metric, a
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -205,3 +206,28 @@ def adaptive_distances(
     qb, qd = split_parts(expanded, words, stored_weight)
     cb, cd = split_parts(vectors, words, stored_weight)
     return _l1(qb, cb) + w * _l1(qd, cd)
+
+
+def adaptive_rerank(
+    query: np.ndarray,
+    search: Callable[[np.ndarray, int], np.ndarray],
+    vectors_of: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    words: int, stored_weight: float, rule: AdaptiveRule, candidates: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The served re-rank: the fused index searched for the query's `candidates` nearest, the weight and
+    the expanded query found among them, the index searched again for the expanded query, and the union
+    of both answers ranked by adaptive_distances.
+
+    query      : (v + c,) fused vector
+    search     : (vector, n) -> ids (<= n,) of the n nearest by the index's fused L1 (the query's own
+                 stored copy left out by the caller when it must be)
+    vectors_of : ids (n,) -> (ids kept (n',), their stored fused vectors (n', v + c))
+    -> ids (u,) and their distances (u,), ascending (ties in id order)."""
+    ids, vectors = vectors_of(search(query, candidates))
+    if len(ids) == 0:
+        return np.zeros(0, np.int64), np.zeros(0)
+    w, expanded = adaptive_query(query, vectors, words, stored_weight, rule)
+    union, vectors = vectors_of(np.union1d(ids, search(expanded, candidates)))
+    dist = adaptive_distances(expanded, w, vectors, words, stored_weight)
+    order = np.argsort(dist, kind="stable")
+    return union[order], dist[order]

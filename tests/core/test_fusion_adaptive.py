@@ -10,6 +10,7 @@ from app.core.fusion import (
     FusionScales,
     adaptive_distances,
     adaptive_query,
+    adaptive_rerank,
     agreement,
     fuse,
     query_weight,
@@ -113,3 +114,37 @@ def test_a_noisy_query_whose_bof_points_at_the_wrong_class_is_ranked_by_its_shap
     assert w == pytest.approx(0.4 * (0.9 * 3) ** 3)
     order = np.argsort(adaptive_distances(expanded, w, cands, 1, stored), kind="stable")
     assert set(order[:3]) == {0, 1, 2}
+
+
+def test_rerank_ranks_the_union_of_both_searches_by_the_adaptive_distance():
+    """A brute-force 'index' of six vectors (ids 10-15) answering 2 candidates per search: the union of
+    the query's and the expanded query's answers is ranked by adaptive_distances, nothing else."""
+    stored = 1.0
+    db = np.array([[0.0, 0.0], [0.2, 0.1], [0.4, 0.2], [3.0, 2.0], [3.1, 2.6], [3.2, 3.2]], np.float32)
+    ids = np.arange(10, 16)
+    searched: list[np.ndarray] = []
+
+    def search(vector: np.ndarray, n: int) -> np.ndarray:
+        searched.append(vector)
+        return ids[np.argsort(np.abs(db - vector).sum(1), kind="stable")[:n]]
+
+    def vectors_of(wanted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return wanted, db[wanted - 10]
+
+    rule = AdaptiveRule(weight=0.4, neighbours=2, expansion=1)
+    query = np.array([0.5, 0.25], np.float32)
+    got, dist = adaptive_rerank(query, search, vectors_of, 1, stored, rule, candidates=2)
+    assert len(searched) == 2
+    w, expanded = adaptive_query(query, db[[2, 1]], 1, stored, rule)  # the first answer: ids 12, 11
+    np.testing.assert_array_equal(searched[1], expanded)
+    union = np.union1d([12, 11], ids[np.argsort(np.abs(db - expanded).sum(1), kind="stable")[:2]])
+    want = adaptive_distances(expanded, w, db[union - 10], 1, stored)
+    np.testing.assert_array_equal(got, union[np.argsort(want, kind="stable")])
+    np.testing.assert_allclose(dist, np.sort(want))
+    assert np.all(np.diff(dist) >= 0)
+
+
+def test_rerank_of_an_empty_answer_is_empty():
+    got, dist = adaptive_rerank(np.zeros(2, np.float32), lambda v, n: np.zeros(0, np.int64),
+                                lambda i: (i, np.zeros((0, 2), np.float32)), 1, 1.0, AdaptiveRule(), 5)
+    assert got.shape == dist.shape == (0,)
