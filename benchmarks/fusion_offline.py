@@ -32,7 +32,7 @@ from app.core import fusion
 from app.core.baselines import euclidean_distance, shape_dna
 from app.core.pipeline import DescribeParams, ShapeDescription
 from app.core.vocabulary import EncodeParams, Vocabulary
-from app.evaluation import sets
+from app.evaluation import adaptive, sets
 from app.evaluation.cache import DescriptionCache, Variant
 
 SHREC = "shrec11-simplified"
@@ -118,23 +118,8 @@ def ranks(d: np.ndarray) -> np.ndarray:
 def served_adaptive(
     col: Column, words: int, stored: float, rule: fusion.AdaptiveRule, n_cand: int
 ) -> np.ndarray:
-    """(q, N) as served (fusion.adaptive_rerank, brute-force L1 for the index); the shapes outside the
-    union of its two searches follow in the served order."""
-    served = _masked(l1(col.queries, col.db), col)
-    out = np.empty_like(served)
-    for i, q in enumerate(col.queries):
-
-        def search(vector: np.ndarray, n: int, i: int = i) -> np.ndarray:
-            d = np.abs(col.db - vector).sum(axis=1)
-            if col.left_out[i] >= 0:
-                d[col.left_out[i]] = np.inf
-            near = np.argsort(d, kind="stable")[:n]
-            return near[np.isfinite(d[near])]  # the left-out shape is not a candidate
-
-        ids, _ = fusion.adaptive_rerank(q, search, lambda j: (j, col.db[j]), words, stored, rule, n_cand)
-        rest = np.setdiff1d(np.argsort(served[i], kind="stable"), ids, assume_unique=True)
-        out[i, np.concatenate([ids, rest])] = np.arange(len(col.db))  # a rank, as a distance
-    return _masked(out, col)
+    """(q, N) as served (app.evaluation.adaptive: brute-force L1 for the index)."""
+    return _masked(adaptive.ranks(col.queries, col.db, col.left_out, words, stored, rule, n_cand), col)
 
 
 def full_adaptive(col: Column, words: int, stored: float, rule: fusion.AdaptiveRule) -> np.ndarray:
