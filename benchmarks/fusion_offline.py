@@ -140,6 +140,7 @@ def rules(words: int, stored: float, rule: fusion.AdaptiveRule, n_cand: int) -> 
 
     def local(col: Column, k: int = 10) -> np.ndarray:
         b, d = parts(col)
+        k = min(k, b.shape[1] - 1)  # a small column: its farthest shape but the left-out one
         return b / np.sort(b, axis=1)[:, k - 1:k] + d / np.sort(d, axis=1)[:, k - 1:k]
 
     return {
