@@ -102,6 +102,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "named as in DIR are the same shapes and are left out of their own ranking")
     p.add_argument("--fusion", default="", metavar="W[,W]",
                    help="per BoF row, also a row fused with Shape-DNA at each weight W (e.g. 0.5,1)")
+    p.add_argument("--adaptive-fusion", action="store_true",
+                   help="with --vocabulary: also score each frozen fused line re-ranked by the "
+                   "query-adaptive fusion the service runs (SHAPEBAG_FUSION_RERANK)")
     p.add_argument("--seed", type=int, default=0, help="k-means and noise seed")
     p.add_argument("--seeds", type=int, default=1, metavar="N",
                    help="average BoF lines over N k-means seeds (seed, seed+1, ...) and show their spread")
@@ -159,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
         noise=args.noise,
         queries=args.queries,
         fusion=fusion,
+        adaptive_fusion=args.adaptive_fusion,
         seed=args.seed,
         seeds=args.seeds,
         per_class=args.per_class,

@@ -17,6 +17,7 @@ Shape-DNA is compared with L1 here (Reuter used L2): the index has one metric, a
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -104,3 +105,129 @@ def fuse(bof: np.ndarray, dna: np.ndarray, scales: FusionScales) -> np.ndarray:
         raise ValueError(f"Shape-DNA has {dna.shape[-1]} entries, the scales were fit on {scales.count}")
     parts = (bof / scales.bof, scales.weight * dna / scales.dna)
     return np.concatenate(parts, axis=-1).astype(np.float32)
+
+
+# --- query-adaptive fusion: a re-rank of the candidates of the fused index -------------------------------
+#
+# A fixed weight cannot serve every collection: where the Shape-DNA is weak (open scans) any weight near 1
+# costs the BoF's lead, and where a noisy query's BoF is misleading (its words moved, its spectrum did not)
+# only the Shape-DNA finds its class. Each query is weighed by how well each part's nearest neighbours
+# agree with the *other* part: the k nearest by BoF are a tight group in Shape-DNA distance when the BoF
+# found the query's class, and the reverse. The weight then drives one step of query expansion
+# (the query averaged with its m nearest), which pulls a noisy query's BoF back towards its class.
+
+
+@dataclass(frozen=True)
+class AdaptiveRule:
+    """The query-adaptive re-rank (docs/results.md, issue 30).
+
+    weight     : w0, the Shape-DNA weight when both parts agree (a BoF + w0 × DNA ranking)
+    pivot      : τ, agreement ratio below which the Shape-DNA gains weight: w = w0 · max(1, τ / r)^p
+    power      : p
+    neighbours : k, each part's nearest neighbours whose agreement is measured
+    expansion  : m, nearest candidates averaged into the query before the final ranking (0: none)
+    """
+
+    weight: float = 0.4
+    pivot: float = 0.9
+    power: float = 3.0
+    neighbours: int = 10
+    expansion: int = 2
+
+    def __post_init__(self) -> None:
+        if not (self.weight > 0 and self.pivot > 0 and self.power >= 0 and self.neighbours >= 2
+                and self.expansion >= 0):
+            raise ValueError(f"invalid adaptive fusion rule: {self}")
+
+
+def split_parts(vectors: np.ndarray, words: int, stored_weight: float) -> tuple[np.ndarray, np.ndarray]:
+    """Fused vectors (..., v + c) -> bof / s_bof (..., v), dna / s_dna (..., c): the stored weight undone."""
+    if stored_weight <= 0:
+        raise ValueError("the fused vectors carry no Shape-DNA part (weight 0)")
+    vectors = np.asarray(vectors, dtype=np.float64)
+    return vectors[..., :words], vectors[..., words:] / stored_weight
+
+
+def _l1(query: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    return np.abs(vectors - query).sum(axis=-1)
+
+
+def _spread(parts: np.ndarray, members: np.ndarray) -> float:
+    """Mean L1 distance between the rows `members` of `parts` (n, d), over the ordered pairs i != j."""
+    x = parts[members]
+    k = len(x)
+    return float(np.abs(x[:, None, :] - x[None, :, :]).sum()) / (k * (k - 1))
+
+
+def agreement(b: np.ndarray, d: np.ndarray, bofs: np.ndarray, dnas: np.ndarray, k: int) -> float:
+    """r = x_bof / x_dna for one query; b, d (n,) its part distances to n candidates, bofs (n, v),
+    dnas (n, c) the candidates' parts.
+
+    x_bof = spread in DNA of the DNA's k nearest / spread in DNA of the BoF's k nearest (1 when the BoF's
+    neighbours are as tight a group to the Shape-DNA as its own), x_dna the same the other way round.
+    r < 1: the Shape-DNA's neighbours look more like one class than the BoF's. 1 when undefined."""
+    k = min(k, len(b))
+    if k < 2:
+        return 1.0
+    near_b = np.argsort(b, kind="stable")[:k]
+    near_d = np.argsort(d, kind="stable")[:k]
+    spreads = (_spread(dnas, near_d), _spread(dnas, near_b), _spread(bofs, near_b), _spread(bofs, near_d))
+    if min(spreads) <= 0:  # duplicates: no evidence either way
+        return 1.0
+    return (spreads[0] / spreads[1]) / (spreads[2] / spreads[3])
+
+
+def query_weight(r: float, rule: AdaptiveRule) -> float:
+    """w = w0 · max(1, τ / r)^p: the Shape-DNA's weight for one query."""
+    return rule.weight * max(1.0, rule.pivot / r) ** rule.power
+
+
+def adaptive_query(
+    query: np.ndarray, candidates: np.ndarray, words: int, stored_weight: float, rule: AdaptiveRule
+) -> tuple[float, np.ndarray]:
+    """query (v + c,) fused, candidates (n, v + c) its nearest stored vectors (the query itself
+    excluded) -> (w, expanded query (v + c,) in the same fused layout)."""
+    qb, qd = split_parts(query, words, stored_weight)
+    cb, cd = split_parts(candidates, words, stored_weight)
+    b, d = _l1(qb, cb), _l1(qd, cd)
+    w = query_weight(agreement(b, d, cb, cd, rule.neighbours), rule)
+    m = min(rule.expansion, len(b))
+    if m == 0:
+        return w, np.asarray(query, dtype=np.float32)
+    near = np.argsort(b + w * d, kind="stable")[:m]
+    expanded = (np.asarray(query, dtype=np.float64) + np.asarray(candidates, dtype=np.float64)[near].sum(0))
+    return w, (expanded / (m + 1)).astype(np.float32)
+
+
+def adaptive_distances(
+    expanded: np.ndarray, w: float, vectors: np.ndarray, words: int, stored_weight: float
+) -> np.ndarray:
+    """(n,) L1(bof) / s_bof + w · L1(dna) / s_dna of the expanded query to vectors (n, v + c)."""
+    qb, qd = split_parts(expanded, words, stored_weight)
+    cb, cd = split_parts(vectors, words, stored_weight)
+    return _l1(qb, cb) + w * _l1(qd, cd)
+
+
+def adaptive_rerank(
+    query: np.ndarray,
+    search: Callable[[np.ndarray, int], np.ndarray],
+    vectors_of: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    words: int, stored_weight: float, rule: AdaptiveRule, candidates: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The served re-rank: the fused index searched for the query's `candidates` nearest, the weight and
+    the expanded query found among them, the index searched again for the expanded query, and the union
+    of both answers ranked by adaptive_distances.
+
+    query      : (v + c,) fused vector
+    search     : (vector, n) -> ids (<= n,) of the n nearest by the index's fused L1 (the query's own
+                 stored copy left out by the caller when it must be)
+    vectors_of : ids (n,) -> (ids kept (n',), their stored fused vectors (n', v + c))
+    -> ids (u,) and their distances (u,), ascending (ties in id order)."""
+    ids, vectors = vectors_of(search(query, candidates))
+    if len(ids) == 0:
+        return np.zeros(0, np.int64), np.zeros(0)
+    w, expanded = adaptive_query(query, vectors, words, stored_weight, rule)
+    union, vectors = vectors_of(np.union1d(ids, search(expanded, candidates)))
+    dist = adaptive_distances(expanded, w, vectors, words, stored_weight)
+    order = np.argsort(dist, kind="stable")
+    return union[order], dist[order]

@@ -26,8 +26,8 @@ from app.core.keypoints import KeypointFilter
 from app.core.pipeline import DescribeParams, ShapeDescription
 from app.core.resolution import SUBDIVISIONS as SUBDIVISIONS  # the --subdivision choices
 from app.core.vocabulary import EncodeParams, Vocabulary, l1_distance
+from app.evaluation import adaptive, sets
 from app.evaluation import cache as cache_mod
-from app.evaluation import sets
 from app.evaluation.results import (
     BASELINES,
     PRESETS,
@@ -230,6 +230,38 @@ def _frozen_lines(
     if other is not None:
         out.append(_score_bof(f"{name} [queries {other.name}]", row, frozen, db, other.descriptions, labels,
                               params, time.perf_counter(), served, other))
+    if options.adaptive_fusion and row.fusion is not None:
+        out += _adaptive_lines(out, row, frozen, db, queries, labels, params, other)
+    return out
+
+
+def _adaptive_lines(
+    fixed: list[RowResult], row: Row, vocab: Vocabulary, db: list[ShapeDescription],
+    queries: list[ShapeDescription] | None, labels: np.ndarray, params: EncodeParams, other: CrossSet | None,
+) -> list[RowResult]:
+    """The frozen fused lines `fixed` (clean, noisy, other folder) re-ranked as the service does
+    (app.evaluation.adaptive), each Δ against its fixed-fusion line."""
+    scales = vocab.fusion
+    if scales is None or scales.weight <= 0:
+        return []
+    db_vec = np.stack([vocab.encode(d, params) for d in db])
+    sets_: list[tuple[np.ndarray, np.ndarray, np.ndarray, CrossSet | None]] = [
+        (db_vec, labels, np.arange(len(db)), None)]
+    if queries is not None:
+        sets_.append((np.stack([vocab.encode(d, params) for d in queries]), labels, np.arange(len(db)), None))
+    if other is not None:
+        sets_.append((np.stack([vocab.encode(d, params) for d in other.descriptions]), other.labels,
+                      other.pairs, other))
+    out = []
+    for line, (q_vec, q_labels, left_out, cross) in zip(fixed, sets_, strict=True):
+        t0 = time.perf_counter()
+        rank = adaptive.ranks(q_vec, db_vec, left_out, vocab.size, scales.weight)
+        if cross is None:
+            scores = metrics.retrieval_scores(rank, labels)
+        else:
+            scores = sets.cross_scores(rank, q_labels, labels, cross.pairs)[0]
+        out.append(RowResult(f"{line.name} [adaptive]", "bof", scores, line.d,
+                             time.perf_counter() - t0, line, dict(line.details, adaptive=True)))
     return out
 
 

@@ -57,6 +57,7 @@ class EvaluationOptions:
     noise: float = 0.0  # > 0: adds a line with noisy queries against the clean database
     queries: Path | None = None  # labelled folder: adds a line with its meshes as queries
     fusion: tuple[float, ...] = ()  # Shape-DNA weights: adds a fused row per BoF row and weight
+    adaptive_fusion: bool = False  # frozen fused lines also re-ranked as served (app.evaluation.adaptive)
     seed: int = 0
     seeds: int = 1  # k-means seeds seed, seed+1, ...: BoF lines report the mean (and the spread)
     per_class: bool = False  # print where each clean BoF row loses (per-class mAP, first-tier intruders)

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.core.pipeline import ShapeDescription
+from app.services import fusion_rerank
 from app.services import partial as partial_mod
 from app.services.context import ServiceContext
 from app.services.errors import ConflictError, InvalidInputError, NotFoundError, NotReadyError
@@ -77,7 +78,10 @@ def search_description(
         t_encode = time.perf_counter() - t
         t = time.perf_counter()
         try:
-            dist, ids, vid = live.search(vector, wanted, allowed, vocabulary_id=vid)
+            if not piece and fusion_rerank.applies(ctx, live):  # a piece is re-ranked by its rim instead
+                dist, ids, vid = fusion_rerank.search(ctx, live, vector, wanted, allowed, vid)
+            else:
+                dist, ids, vid = live.search(vector, wanted, allowed, vocabulary_id=vid)
         except NotReadyError:
             if live.pair is None:
                 raise
@@ -127,7 +131,10 @@ def similar(
         if vector is None:
             raise ConflictError(f"model {model_id} is {model.status}, not indexed: nothing to compare yet")
         try:
-            dist, ids, vid = live.search(vector, k + 1, allowed, vocabulary_id=pair.record.id)
+            if fusion_rerank.applies(ctx, live):
+                dist, ids, vid = fusion_rerank.search(ctx, live, vector, k, allowed, pair.record.id, model_id)
+            else:
+                dist, ids, vid = live.search(vector, k + 1, allowed, vocabulary_id=pair.record.id)
         except NotReadyError:
             if live.pair is None:
                 raise

@@ -123,6 +123,18 @@ def vector_of(conn: sqlite3.Connection, model_id: int, vocabulary_id: int) -> np
     return None if row is None else np.frombuffer(row[0], dtype=np.float32).copy()
 
 
+def vectors_of(conn: sqlite3.Connection, vocabulary_id: int, model_ids: list[int]) -> dict[int, np.ndarray]:
+    """The stored vectors of these models under one version (those it has), by model id."""
+    if not model_ids:
+        return {}
+    marks = ",".join("?" * len(model_ids))
+    rows = conn.execute(
+        f"SELECT model_id, vector FROM bof WHERE vocabulary_id = ? AND model_id IN ({marks})",
+        [vocabulary_id, *(int(i) for i in model_ids)],
+    ).fetchall()
+    return {int(r[0]): np.frombuffer(r[1], dtype=np.float32).copy() for r in rows}
+
+
 def ready_without_vector(conn: sqlite3.Connection, vocabulary_id: int) -> list[int]:
     rows = conn.execute(
         "SELECT id FROM models WHERE status = 'ready' AND id NOT IN"

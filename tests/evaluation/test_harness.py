@@ -428,3 +428,31 @@ def test_the_progress_line_names_the_rows_it_describes_for(
     heads = {line.split(":")[0] for line in lines}
     # one describe pass per parameter set, named by every row it serves (fused rows share their row's)
     assert heads == {"describe for run5, run1, shape-dna", "describe for paper"}, lines
+
+
+def test_adaptive_fusion_adds_a_served_rerank_line_per_frozen_line(folder: Path, tmp_path: Path) -> None:
+    cache = tmp_path / "cache"
+    evaluate(folder, _options(cache, rows=("run5",), vocabulary_size=4))  # describes into the cache
+    shapes = [ShapeDescription.load(p) for p in sorted(cache.rglob("*.npz")) if "noise" not in p.name]
+    words = Vocabulary.fit(shapes, size=4, run="run5", seed=3).with_fusion(shapes, weight=1.0)
+    frozen = words.save(tmp_path / "fused")
+    result = evaluate(folder, _options(cache, rows=("run5",), vocabulary_size=4, fusion=(1.0,), noise=0.01,
+                                       vocabulary=frozen, adaptive_fusion=True))
+    by_name = {r.name: r for r in result.rows}
+    fixed = by_name["run5 + 1 DNA [frozen fused]"]
+    clean = by_name["run5 + 1 DNA [frozen fused] [adaptive]"]
+    noisy = by_name["run5 + 1 DNA [frozen fused] [noise 0.01] [adaptive]"]
+    assert clean.reference is fixed and noisy.reference is by_name["run5 + 1 DNA [frozen fused] [noise 0.01]"]
+    assert 0 < clean.scores["mAP"] <= 1 and 0 < noisy.scores["mAP"] <= 1
+    plain = evaluate(folder, _options(cache, rows=("run5",), vocabulary_size=4, fusion=(1.0,),
+                                      vocabulary=frozen))
+    assert not any("[adaptive]" in r.name for r in plain.rows)  # only when asked
+
+
+def test_command_passes_adaptive_fusion(folder: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    parser, seen = _stopped_command(monkeypatch)
+    for argv, want in ((["--adaptive-fusion"], True), ([], False)):
+        args = parser.parse_args(["evaluate", str(folder), *argv])
+        with pytest.raises(CommandError, match="stop here"):
+            args.func(args)
+        assert seen[-1].adaptive_fusion is want

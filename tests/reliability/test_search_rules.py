@@ -22,7 +22,8 @@ class SwappingLive:
         self.ids = np.asarray(ids, np.int64)
         self.swaps = swaps
         self.encodes = 0
-        self.pair = SimpleNamespace(record=SimpleNamespace(id=2))
+        # pure-BoF vectors: the index's order is served as it is (fusion_rerank.applies)
+        self.pair = SimpleNamespace(record=SimpleNamespace(id=2), params=SimpleNamespace(fusion=False))
 
     def encode(self, description):
         self.encodes += 1

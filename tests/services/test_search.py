@@ -25,7 +25,9 @@ class FakeLive:
         self.swaps = swaps
         self.calls: list[tuple[int, object, int]] = []  # (k, allowed, vocabulary_id) per search
         self.vectors: list[np.ndarray] = []
-        self.pair: SimpleNamespace | None = SimpleNamespace(record=SimpleNamespace(id=VOCAB_ID))
+        # pure-BoF vectors: the index's order is served as it is (fusion_rerank.applies)
+        self.pair: SimpleNamespace | None = SimpleNamespace(
+            record=SimpleNamespace(id=VOCAB_ID), params=SimpleNamespace(fusion=False))
 
     def require(self) -> SimpleNamespace:
         assert self.pair is not None

@@ -97,6 +97,13 @@ def test_one_active_vocabulary_and_vectors_by_seq(db):
         assert ids.tolist() == [m1] and newer > seq
         np.testing.assert_array_equal(vocab_repo.vector_of(conn, m1, v2), vec1 * 3)
         assert vocab_repo.vector_of(conn, m2, v1) is None
+        # a batch by model id: the version's vectors of those it has, nothing for an empty list
+        got = vocab_repo.vectors_of(conn, v2, [m2, m1, 999])
+        assert sorted(got) == [m1, m2]
+        np.testing.assert_array_equal(got[m1], vec1 * 3)
+        np.testing.assert_array_equal(got[m2], vec1 * 2)
+        assert list(vocab_repo.vectors_of(conn, v1, [m1, m2])) == [m1]
+        assert vocab_repo.vectors_of(conn, v1, []) == {}
 
 
 def test_a_version_records_how_its_vectors_are_encoded(db):

@@ -1,0 +1,45 @@
+"""The query-adaptive fusion re-rank (app.core.fusion.adaptive_rerank) scored as the service runs it.
+
+The index is brute-force L1 over the fused vectors here (what FAISS's flat METRIC_L1 index returns), so
+a line scored with `ranks` is the served ranking of its first `candidates` results; the shapes outside
+the union of the re-rank's two searches follow in the fixed fusion's order (the service never returns
+them: k <= app.services.search.MAX_K <= candidates).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from app.core import fusion
+
+CANDIDATES = 100  # each of the re-rank's two index searches: the service's fusion_rerank.CANDIDATES
+
+
+def ranks(
+    queries: np.ndarray, db: np.ndarray, left_out: np.ndarray, words: int, stored_weight: float,
+    rule: fusion.AdaptiveRule | None = None, candidates: int = CANDIDATES,
+) -> np.ndarray:
+    """queries (q, v + c), db (N, v + c) fused vectors; left_out (q,) the database index each query must
+    not see (its own or clean copy), or -1 -> (q, N) float64 rank of each shape in each query's list
+    (the left-out shape last), usable as a distance matrix by app.core.metrics and evaluation.sets."""
+    rule = rule or fusion.AdaptiveRule()
+    db = np.asarray(db, dtype=np.float32)
+    out = np.empty((len(queries), len(db)))
+    for i, query in enumerate(np.asarray(queries, dtype=np.float32)):
+        skip = int(left_out[i])
+
+        def search(vector: np.ndarray, n: int, skip: int = skip) -> np.ndarray:
+            d = np.abs(db - vector).sum(axis=1, dtype=np.float64)
+            if skip >= 0:
+                d[skip] = np.inf
+            near = np.argsort(d, kind="stable")[:n]
+            return near[np.isfinite(d[near])]
+
+        ids, _ = fusion.adaptive_rerank(query, search, lambda j: (j, db[j]), words, stored_weight, rule,
+                                        candidates)
+        served = np.abs(db - query).sum(axis=1, dtype=np.float64)
+        if skip >= 0:
+            served[skip] = np.inf
+        rest = np.setdiff1d(np.argsort(served, kind="stable"), ids, assume_unique=True)
+        out[i, np.concatenate([ids, rest])] = np.arange(len(db))
+    return out

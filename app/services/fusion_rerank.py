@@ -1,0 +1,56 @@
+"""The query-adaptive fusion re-rank (app.core.fusion.adaptive_rerank) over the fused L1 index.
+
+The index keeps ranking by the fixed fusion (BoF + w × Shape-DNA, each over its vocabulary scale); a
+query then takes the union of two of its searches (the query's and the expanded query's CANDIDATES
+nearest) and ranks it by its own weight (docs/results.md, issue 30). SHAPEBAG_FUSION_RERANK=false
+serves the index's order as it is; a vocabulary without fusion scales (pure BoF) never re-ranks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from app.core import fusion
+from app.services.context import ServiceContext
+from app.services.errors import NotReadyError
+from app.services.live_index import LiveIndex
+from app.storage import vocabularies as vocab_repo
+
+CANDIDATES = 100  # each of the two searches; >= search.MAX_K, so every answer comes from the union
+RULE = fusion.AdaptiveRule()
+
+
+def applies(ctx: ServiceContext, live: LiveIndex) -> bool:
+    """Whether the active pair's vectors are fused (a Shape-DNA part with a weight) and re-ranking is on."""
+    pair = live.pair
+    if not ctx.settings.fusion_rerank or pair is None or not pair.params.fusion:
+        return False
+    scales = pair.vocabulary.fusion
+    return scales is not None and scales.weight > 0
+
+
+def search(
+    ctx: ServiceContext, live: LiveIndex, vector: np.ndarray, k: int, allowed: np.ndarray | None,
+    vocabulary_id: int, exclude: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """vector (v + c,) fused -> distances (<= k,), ids (<= k,) re-ranked, and the version that answered.
+    `exclude`: a stored model left out (the one whose neighbours are asked)."""
+    pair = live.require()
+    if pair.record.id != vocabulary_id or pair.vocabulary.fusion is None:
+        raise NotReadyError("the vocabulary changed while the query was encoded; retry")
+    scales = pair.vocabulary.fusion
+
+    def nearest(v: np.ndarray, n: int) -> np.ndarray:
+        _, ids, _ = live.search(v, n + (exclude is not None), allowed, vocabulary_id=vocabulary_id)
+        return ids[ids != exclude][:n]
+
+    def vectors_of(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        with ctx.db.read() as conn:
+            found = vocab_repo.vectors_of(conn, vocabulary_id, [int(i) for i in ids])
+        kept = np.array([i for i in ids if int(i) in found], np.int64)  # deleted a moment ago: dropped
+        rows = [found[int(i)] for i in kept]
+        return kept, (np.stack(rows) if rows else np.zeros((0, len(vector)), np.float32))
+
+    ids, dist = fusion.adaptive_rerank(vector, nearest, vectors_of, pair.vocabulary.size, scales.weight, RULE,
+                                       max(CANDIDATES, k))
+    return dist[:k].astype(np.float32), ids[:k], vocabulary_id

@@ -1,0 +1,161 @@
+"""The served query-adaptive re-rank (app.services.fusion_rerank): the order app.core.fusion computes,
+only for fused vectors and only when on; the asked model left out; deleted models dropped; swaps retried."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from app.core import fusion
+from app.services import fusion_rerank, search
+from app.services.context import open_context
+from app.services.errors import NotReadyError
+from app.services.live_index import LiveIndex
+from app.storage import models as models_repo
+from app.storage import vocabularies as vocab_repo
+from tests.conftest import make_settings
+
+VOCAB_ID = 3
+# fused layout [bof, 1 × dna]: class a = models 1-3, class b = models 4-6 (no two distances tie)
+STORED = {1: [0.0, 0.0], 2: [0.21, 0.1], 3: [0.43, 0.2], 4: [3.0, 2.0], 5: [3.1, 2.6], 6: [3.2, 3.2]}
+QUERY = np.array([2.9, 0.1], np.float32)  # BoF next to class b, Shape-DNA inside class a
+
+
+class BruteLive:
+    """A LiveIndex stand-in over STORED: exact L1, as the FAISS flat index answers."""
+
+    def __init__(self, fused: bool = True, swaps: int = 0) -> None:
+        scales = fusion.FusionScales(bof=1.0, dna=1.0, weight=1.0, count=1) if fused else None
+        self.pair = SimpleNamespace(record=SimpleNamespace(id=VOCAB_ID), params=SimpleNamespace(fusion=fused),
+                                    vocabulary=SimpleNamespace(size=1, fusion=scales))
+        self.swaps = swaps
+        self.searches = 0
+
+    def require(self) -> SimpleNamespace:
+        return self.pair
+
+    def encode(self, description: object) -> tuple[int, np.ndarray]:
+        return VOCAB_ID, QUERY
+
+    def search(self, vector, k, allowed, vocabulary_id):
+        self.searches += 1
+        if self.swaps:
+            self.swaps -= 1
+            raise NotReadyError("the vocabulary changed while the query was encoded; retry")
+        ids = np.array(sorted(STORED), np.int64)
+        if allowed is not None:
+            ids = ids[np.isin(ids, allowed)]
+        d = np.array([np.abs(np.array(STORED[i], np.float32) - vector).sum() for i in ids], np.float32)
+        order = np.argsort(d, kind="stable")[:k]
+        return d[order], ids[order], vocabulary_id
+
+
+@pytest.fixture
+def deleted() -> set[int]:
+    return set()
+
+
+@pytest.fixture
+def ctx(settings, monkeypatch, deleted):
+    ctx = open_context(settings.model_copy(update={"fusion_rerank": True}))
+    with ctx.db.write() as conn:
+        for i in range(6):
+            mid = models_repo.insert(conn, name=f"m{i}", label="ab"[i // 3], metadata={}, sha256=f"{i:064x}",
+                                     file_type="obj", size_bytes=1)
+            models_repo.set_ready(conn, mid, 10)
+    def vectors_of(conn, vocabulary_id, ids):
+        assert vocabulary_id == VOCAB_ID
+        return {i: np.array(STORED[i], np.float32) for i in ids if i not in deleted}
+
+    monkeypatch.setattr(fusion_rerank.vocab_repo, "vectors_of", vectors_of)
+    # six models: the agreement of each part's 3 nearest (the default 10 would take every model)
+    monkeypatch.setattr(fusion_rerank, "RULE", fusion.AdaptiveRule(neighbours=3, expansion=1))
+    monkeypatch.setattr(search.vocab_repo, "vector_of",
+                        lambda conn, mid, vid: np.array(STORED[mid], np.float32))
+    return ctx
+
+
+def _expected(query: np.ndarray, leave_out: int | None = None) -> list[int]:
+    ids = np.array([i for i in sorted(STORED) if i != leave_out])
+    db = np.array([STORED[i] for i in ids], np.float32)
+
+    def nearest(v, n):
+        return ids[np.argsort(np.abs(db - v).sum(1), kind="stable")[:n]]
+
+    got, _ = fusion.adaptive_rerank(query, nearest, lambda j: (j, db[np.searchsorted(ids, j)]), 1, 1.0,
+                                    fusion_rerank.RULE, fusion_rerank.CANDIDATES)
+    return got.tolist()
+
+
+def test_a_query_is_answered_in_the_adaptive_order(ctx):
+    result = search.search_description(ctx, BruteLive(), SimpleNamespace(local=None), k=6)  # type: ignore[arg-type]
+    got = [h.model.id for h in result.hits]
+    assert got == _expected(QUERY)
+    assert set(got[:3]) == {1, 2, 3}  # the Shape-DNA's class first (the fixed fusion ranks 4 first)
+    assert [h.rank for h in result.hits] == [1, 2, 3, 4, 5, 6]
+    assert all(a.distance <= b.distance for a, b in zip(result.hits, result.hits[1:], strict=False))
+
+
+def test_off_or_pure_bof_serves_the_index_order(ctx, settings):
+    fixed = BruteLive().search(QUERY, 6, None, VOCAB_ID)[1].tolist()  # the fixed fusion's order
+    assert fixed[0] == 4 and fixed != _expected(QUERY)
+    assert settings.fusion_rerank is False  # off by default
+    off = open_context(settings)
+    for c, live in ((ctx, BruteLive(fused=False)), (off, BruteLive())):
+        result = search.search_description(c, live, SimpleNamespace(local=None), k=6)  # type: ignore[arg-type]
+        assert [h.model.id for h in result.hits] == fixed
+        assert live.searches == 1
+
+
+def test_similar_leaves_the_model_out_of_its_candidates(ctx):
+    live = BruteLive()
+    result = search.similar(ctx, live, 2, k=5)  # type: ignore[arg-type]
+    got = [h.model.id for h in result.hits]
+    assert 2 not in got and len(got) == 5
+    assert got == _expected(np.array(STORED[2], np.float32), leave_out=2)
+    assert live.searches == 2  # the query's and the expanded query's
+
+
+def test_k_cuts_the_reranked_list_and_deleted_models_are_dropped(ctx, deleted):
+    deleted.add(1)
+    result = search.search_description(ctx, BruteLive(), SimpleNamespace(local=None), k=2)  # type: ignore[arg-type]
+    assert len(result.hits) == 2 and 1 not in [h.model.id for h in result.hits]
+
+
+def test_a_swap_during_the_rerank_is_retried(ctx):
+    live = BruteLive(swaps=1)
+    result = search.search_description(ctx, live, SimpleNamespace(local=None), k=3)  # type: ignore[arg-type]
+    assert [h.model.id for h in result.hits] == _expected(QUERY)[:3]
+    live = BruteLive()
+    with pytest.raises(NotReadyError, match="changed"):
+        fusion_rerank.search(ctx, live, QUERY, 3, None, VOCAB_ID + 1)  # type: ignore[arg-type]
+
+
+def test_the_faiss_index_and_the_database_serve_what_the_core_ranks(data_dir):
+    """The seeded collection (fused vectors, FAISS flat L1): similar() with the re-rank on answers the
+    order and the distances of fusion.adaptive_rerank over a brute-force copy of the stored vectors."""
+    ctx = open_context(make_settings(data_dir, fusion_rerank=True))
+    live = LiveIndex(ctx)
+    live.refresh()
+    pair = live.pair
+    assert pair is not None and pair.vocabulary.fusion is not None and fusion_rerank.applies(ctx, live)
+    with ctx.db.read() as conn:
+        ids, vectors, _ = vocab_repo.vectors(conn, pair.record.id)
+    mid = int(ids[0])
+    db_ids, db = ids[1:], vectors[1:]
+
+    def nearest(v, n):
+        return db_ids[np.argsort(np.abs(db.astype(np.float64) - v).sum(1), kind="stable")[:n]]
+
+    def vectors_of(j):
+        return j, db[np.searchsorted(db_ids, j)]
+
+    assert np.all(np.diff(db_ids) > 0)
+    want, dist = fusion.adaptive_rerank(vectors[0], nearest, vectors_of, pair.vocabulary.size,
+                                        pair.vocabulary.fusion.weight, fusion_rerank.RULE,
+                                        fusion_rerank.CANDIDATES)
+    result = search.similar(ctx, live, mid, k=5)
+    assert [h.model.id for h in result.hits] == want[:5].tolist()
+    np.testing.assert_allclose([h.distance for h in result.hits], dist[:5], rtol=1e-5)
