@@ -141,9 +141,9 @@ class Settings(BaseSettings):
     poll_interval_s: float = 0.5  # how often the API process looks for newly ready models
     index_save_interval_s: float = 30.0
     index_backend: str = "faiss"  # faiss | numpy
-    # fused vectors: each query re-ranks the index's candidates (services/fusion_rerank). Off by default:
-    # on, a hit's distance is the re-rank's (a stored copy of the query is no longer at 0, explain differs)
-    fusion_rerank: bool = False
+    # fused vectors: each whole-shape query re-ranks the index's candidates by a query-adaptive fusion
+    # (services/fusion_rerank); a hit's distance stays the index's L1, the re-rank's comes beside it
+    fusion_rerank: bool = True
     vocabulary_size: int = 64
     vocabulary_run: str = "run5"
     auto_vocabulary_min_models: int = 16  # with no vocabulary, fit one once this many models are ready

@@ -150,6 +150,11 @@ class SearchHit(BaseModel):
     label: str | None
     distance: float = Field(description="L1 distance between BoF vectors (+ scaled Shape-DNA when fused)")
     rank: int
+    rerank_distance: float | None = Field(
+        None, description="the query-adaptive fusion's distance, which whole-shape hits are ordered by when"
+        " the vectors are fused (SHAPEBAG_FUSION_RERANK, on by default); null when the index's L1 order is"
+        " served (a piece, pure BoF, or the re-rank turned off)"
+    )
     forward: float | None = Field(
         None, ge=0.0, le=1.0, description="share of the query's surface found in the model (partial matching;"
         " null when the model was described before local signatures were stored)"
@@ -286,5 +291,5 @@ class Explanation(BaseModel):
     shape: ShapeExplained
     against: ShapeExplained | None
     bof_l1: float | None = Field(description="L1 distance between the two BoF histograms")
-    distance: float | None = Field(description="the distance search ranks by (BoF, fused with Shape-DNA)")
+    distance: float | None = Field(description="a hit's `distance`: the index's L1 (BoF, fused with DNA)")
     top_words: list[WordContribution] = Field(description="the words that separate the shapes most")

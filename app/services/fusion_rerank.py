@@ -2,8 +2,11 @@
 
 The index keeps ranking by the fixed fusion (BoF + w × Shape-DNA, each over its vocabulary scale); a
 query then takes the union of two of its searches (the query's and the expanded query's CANDIDATES
-nearest) and ranks it by its own weight (docs/results.md, issue 30). SHAPEBAG_FUSION_RERANK=false
-serves the index's order as it is; a vocabulary without fusion scales (pure BoF) never re-ranks.
+nearest) and ranks it by its own weight (docs/results.md, issue 30). A hit's `distance` stays the
+index's fused L1 distance from the query as sent (a stored copy of it is at 0, and explain decomposes
+that number); the re-rank's own distance, which the hits are ordered by, comes beside it.
+SHAPEBAG_FUSION_RERANK=false serves the index's order as it is; a vocabulary without fusion scales (pure
+BoF) never re-ranks.
 """
 
 from __future__ import annotations
@@ -32,8 +35,9 @@ def applies(ctx: ServiceContext, live: LiveIndex) -> bool:
 def search(
     ctx: ServiceContext, live: LiveIndex, vector: np.ndarray, k: int, allowed: np.ndarray | None,
     vocabulary_id: int, exclude: int | None = None,
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """vector (v + c,) fused -> distances (<= k,), ids (<= k,) re-ranked, and the version that answered.
+) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+    """vector (v + c,) fused -> the index's fused L1 distances (<= k,) of the ids (<= k,) in re-ranked
+    order, the version that answered, and the re-rank's distances (<= k,, ascending).
     `exclude`: a stored model left out (the one whose neighbours are asked)."""
     pair = live.require()
     if pair.record.id != vocabulary_id or pair.vocabulary.fusion is None:
@@ -44,13 +48,20 @@ def search(
         _, ids, _ = live.search(v, n + (exclude is not None), allowed, vocabulary_id=vocabulary_id)
         return ids[ids != exclude][:n]
 
+    seen: dict[int, np.ndarray] = {}  # every candidate's stored vector, read once
+
     def vectors_of(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         with ctx.db.read() as conn:
-            found = vocab_repo.vectors_of(conn, vocabulary_id, [int(i) for i in ids])
+            found = vocab_repo.vectors_of(conn, vocabulary_id, [int(i) for i in ids if int(i) not in seen])
+        seen.update(found)
+        found = {int(i): seen[int(i)] for i in ids if int(i) in seen}
         kept = np.array([i for i in ids if int(i) in found], np.int64)  # deleted a moment ago: dropped
         rows = [found[int(i)] for i in kept]
         return kept, (np.stack(rows) if rows else np.zeros((0, len(vector)), np.float32))
 
     ids, dist = fusion.adaptive_rerank(vector, nearest, vectors_of, pair.vocabulary.size, scales.weight, RULE,
                                        max(CANDIDATES, k))
-    return dist[:k].astype(np.float32), ids[:k], vocabulary_id
+    ids, dist = ids[:k], dist[:k]
+    stored = np.stack([seen[int(i)] for i in ids]) if len(ids) else np.zeros((0, len(vector)), np.float32)
+    index_distance = np.abs(stored.astype(np.float64) - np.asarray(vector, np.float64)).sum(axis=1)
+    return index_distance.astype(np.float32), ids, vocabulary_id, dist.astype(np.float32)

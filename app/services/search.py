@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -28,6 +28,7 @@ class Hit:
     forward: float | None = None  # share of the query found in the model (app.services.partial)
     reverse: float | None = None  # share of the model the query covers
     partial: bool = False  # ranked by the partial re-ranking
+    rerank: float | None = None  # the distance the hits are ordered by (services/fusion_rerank)
 
 
 @dataclass(frozen=True)
@@ -50,14 +51,16 @@ def _allowed(ctx: ServiceContext, label: str | None) -> np.ndarray | None:
         return np.asarray(models_repo.ids_with_label(conn, label), np.int64)
 
 
-def _hits(ctx: ServiceContext, dist: np.ndarray, ids: np.ndarray, k: int) -> list[Hit]:
+def _hits(ctx: ServiceContext, dist: np.ndarray, ids: np.ndarray, k: int,
+          rerank: np.ndarray | None = None) -> list[Hit]:
     with ctx.db.read() as conn:
         records = models_repo.get_many(conn, [int(i) for i in ids])
     hits: list[Hit] = []
-    for d, i in zip(dist, ids, strict=True):
+    for j, (d, i) in enumerate(zip(dist, ids, strict=True)):
         rec = records.get(int(i))
         if rec is not None and len(hits) < k:  # deleted a moment ago: skip
-            hits.append(Hit(rec, float(d), len(hits) + 1))
+            again = None if rerank is None else float(rerank[j])
+            hits.append(Hit(rec, float(d), len(hits) + 1, rerank=again))
     return hits
 
 
@@ -77,9 +80,10 @@ def search_description(
         vid, vector = live.encode(description)
         t_encode = time.perf_counter() - t
         t = time.perf_counter()
+        rerank = None
         try:
             if not piece and fusion_rerank.applies(ctx, live):  # a piece is re-ranked by its rim instead
-                dist, ids, vid = fusion_rerank.search(ctx, live, vector, wanted, allowed, vid)
+                dist, ids, vid, rerank = fusion_rerank.search(ctx, live, vector, wanted, allowed, vid)
             else:
                 dist, ids, vid = live.search(vector, wanted, allowed, vocabulary_id=vid)
         except NotReadyError:
@@ -88,7 +92,7 @@ def search_description(
             continue
         t_search = time.perf_counter() - t
         t = time.perf_counter()
-        hits = _scored(ctx, description, _hits(ctx, dist, ids, wanted), k, piece)
+        hits = _scored(ctx, description, _hits(ctx, dist, ids, wanted, rerank), k, piece)
         seconds = {"encode": t_encode, "search": t_search, "partial": time.perf_counter() - t}
         return SearchResult(hits, vid, seconds)
     raise NotReadyError("the vocabulary is being swapped; retry")
@@ -108,8 +112,8 @@ def _scored(ctx: ServiceContext, description: ShapeDescription, hits: list[Hit],
         order = sorted(range(len(hits)), key=lambda j: (rank_of[j], j))
         hits, found = [hits[j] for j in order[:k]], [found[j] for j in order[:k]]
     return [
-        Hit(h.model, h.distance, rank, forward=m.forward if m else None, reverse=m.reverse if m else None,
-            partial=piece)
+        replace(h, rank=rank, forward=m.forward if m else None, reverse=m.reverse if m else None,
+                partial=piece)
         for rank, (h, m) in enumerate(zip(hits, found, strict=True), start=1)
     ]
 
@@ -130,9 +134,11 @@ def similar(
             raise NotFoundError(f"no model with id {model_id}")
         if vector is None:
             raise ConflictError(f"model {model_id} is {model.status}, not indexed: nothing to compare yet")
+        rerank = None
         try:
             if fusion_rerank.applies(ctx, live):
-                dist, ids, vid = fusion_rerank.search(ctx, live, vector, k, allowed, pair.record.id, model_id)
+                dist, ids, vid, rerank = fusion_rerank.search(ctx, live, vector, k, allowed, pair.record.id,
+                                                              model_id)
             else:
                 dist, ids, vid = live.search(vector, k + 1, allowed, vocabulary_id=pair.record.id)
         except NotReadyError:
@@ -140,6 +146,6 @@ def similar(
                 raise
             continue
         keep = ids != model_id
-        hits = _hits(ctx, dist[keep], ids[keep], k)
+        hits = _hits(ctx, dist[keep], ids[keep], k, None if rerank is None else rerank[keep])
         return SearchResult(hits, vid, {"search": time.perf_counter() - t})
     raise NotReadyError("the vocabulary is being swapped; retry")

@@ -58,7 +58,9 @@ def test_upload_ingest_search_duplicate_and_delete(data_dir, corpus):
         top = result["data"][0]
         assert top["distance"] < 1e-5 and top["rank"] == 1 and top["label"] == label
         assert [h["rank"] for h in result["data"]] == list(range(1, len(result["data"]) + 1))
-        assert np.all(np.diff([h["distance"] for h in result["data"]]) >= 0)
+        # ordered by the fusion re-rank's distance (on by default); distance stays the index's L1
+        assert all(h["rerank_distance"] is not None for h in result["data"])
+        assert np.all(np.diff([h["rerank_distance"] for h in result["data"]]) >= 0)
         assert result["seconds"]["describe"] > 0 and "search" in result["seconds"]
 
         # label filter

@@ -1,5 +1,7 @@
 """The served query-adaptive re-rank (app.services.fusion_rerank): the order app.core.fusion computes,
-only for fused vectors and only when on; the asked model left out; deleted models dropped; swaps retried."""
+only for fused vectors and only when on (the default); a hit's distance stays the index's L1 from the
+query as sent, the re-rank's distance beside it; the asked model left out; deleted models dropped; swaps
+retried."""
 
 from __future__ import annotations
 
@@ -8,6 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from app.config import Settings
 from app.core import fusion
 from app.services import fusion_rerank, search
 from app.services.context import open_context
@@ -95,18 +98,30 @@ def test_a_query_is_answered_in_the_adaptive_order(ctx):
     assert got == _expected(QUERY)
     assert set(got[:3]) == {1, 2, 3}  # the Shape-DNA's class first (the fixed fusion ranks 4 first)
     assert [h.rank for h in result.hits] == [1, 2, 3, 4, 5, 6]
-    assert all(a.distance <= b.distance for a, b in zip(result.hits, result.hits[1:], strict=False))
+    assert all(a.rerank <= b.rerank for a, b in zip(result.hits, result.hits[1:], strict=False))
+    # the distance is the index's, of the query as sent: L1 to the stored vector, not in the re-rank's order
+    for h in result.hits:
+        assert h.distance == pytest.approx(np.abs(np.array(STORED[h.model.id]) - QUERY).sum(), rel=1e-6)
+    assert [h.distance for h in result.hits] != sorted(h.distance for h in result.hits)
+
+
+def test_a_stored_copy_of_the_query_stays_first_at_distance_zero(ctx, monkeypatch):
+    copy = np.array(STORED[5], np.float32)
+    monkeypatch.setattr(BruteLive, "encode", lambda self, description: (VOCAB_ID, copy))
+    result = search.search_description(ctx, BruteLive(), SimpleNamespace(local=None), k=3)  # type: ignore[arg-type]
+    first = result.hits[0]
+    assert first.model.id == 5 and first.distance == 0.0 and first.rerank is not None
 
 
 def test_off_or_pure_bof_serves_the_index_order(ctx, settings):
     fixed = BruteLive().search(QUERY, 6, None, VOCAB_ID)[1].tolist()  # the fixed fusion's order
     assert fixed[0] == 4 and fixed != _expected(QUERY)
-    assert settings.fusion_rerank is False  # off by default
-    off = open_context(settings)
+    assert Settings().fusion_rerank is True  # on by default
+    off = open_context(settings.model_copy(update={"fusion_rerank": False}))
     for c, live in ((ctx, BruteLive(fused=False)), (off, BruteLive())):
         result = search.search_description(c, live, SimpleNamespace(local=None), k=6)  # type: ignore[arg-type]
         assert [h.model.id for h in result.hits] == fixed
-        assert live.searches == 1
+        assert live.searches == 1 and all(h.rerank is None for h in result.hits)
 
 
 def test_similar_leaves_the_model_out_of_its_candidates(ctx):
@@ -158,4 +173,6 @@ def test_the_faiss_index_and_the_database_serve_what_the_core_ranks(data_dir):
                                         fusion_rerank.CANDIDATES)
     result = search.similar(ctx, live, mid, k=5)
     assert [h.model.id for h in result.hits] == want[:5].tolist()
-    np.testing.assert_allclose([h.distance for h in result.hits], dist[:5], rtol=1e-5)
+    np.testing.assert_allclose([h.rerank for h in result.hits], dist[:5], rtol=1e-5)
+    index_l1 = np.abs(db[np.searchsorted(db_ids, want[:5])].astype(np.float64) - vectors[0]).sum(axis=1)
+    np.testing.assert_allclose([h.distance for h in result.hits], index_l1, rtol=1e-5)

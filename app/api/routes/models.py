@@ -184,7 +184,7 @@ def to_response(
     hits = [
         SearchHit(
             model_id=h.model.id, name=h.model.name, label=h.model.label, distance=h.distance, rank=h.rank,
-            forward=h.forward, reverse=h.reverse, partial=h.partial,
+            rerank_distance=h.rerank, forward=h.forward, reverse=h.reverse, partial=h.partial,
             relation=relations.get(h.model.id), evidence=evidence.get(h.model.id),
         )
         for h in result.hits
