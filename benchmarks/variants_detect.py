@@ -28,6 +28,7 @@ import numpy as np
 from app.core.mesh import InvalidMeshError, Mesh, load_mesh
 from app.core.variants import RELATIONS, Prepared, relate
 from app.core.variants.collection import RADIUS, K, shortlist
+from app.core.variants.gate import coarsening
 from app.core.variants.index import FingerprintIndex
 from app.datasets import locate
 from benchmarks.common import machine, table
@@ -116,8 +117,12 @@ class Run:
             # area / diagonal^2 against the stored one's: a decimation that lost thin parts shows here
             stored = self.stored[i][1]
             area = (q.mesh.area() / q.diagonal**2) / (stored.mesh.area() / stored.diagonal**2)
+            rows = np.array([stored.fingerprint] + [o.fingerprint for o in stored.parts if o is not stored])
             self.pairs.append({"query": name, "kind": kind, "stored": self.stored[i][0], "truth": expected,
                                "area_ratio": area,
+                               "fp_whole": float(np.linalg.norm(q.fingerprint - stored.fingerprint)),
+                               "fp_near": float(np.linalg.norm(vectors[:, None] - rows[None], axis=2).min()),
+                               "coarsening": coarsening(q, stored),
                                "got": got, "confidence": conf, "looked_up": i in found,
                                "chamfer": ch, "hausdorff": hd})
 

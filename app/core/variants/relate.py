@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from app.core.variants.align import ICP_ITERATIONS, Similarity, hypotheses, icp_batch, to_world, umeyama
+from app.core.variants.gate import RADIUS, may_relate
 from app.core.variants.onesided import cover_margin, lies_on, vertex_subset
 from app.core.variants.prepared import Prepared, face_keys
 
@@ -45,8 +46,7 @@ QUICK_MARGIN = 4.0  # ... and four times past every tolerance there is `similar`
 EXACT_ROUNDS = 4
 EXACT_TOL = 1e-4  # same triangles: every vertex within this fraction of the diagonal of its partner
 MAX_PARTS = 8  # objects of a multi-object mesh verified one by one ...
-PART_RADIUS = 1.0  # ... against the objects of the other whose fingerprints are this close (the lookup's
-# radius, collection.RADIUS: a decimation to 10 % moves its fingerprint up to about 0.9), the nearest
+PART_RADIUS = RADIUS  # ... against the objects of the other that gate.may_relate lets through, the nearest
 PART_TRIES = 2  # this many of them tried before an object is given up
 ONE_SIDED_CHAMFER = 0.06  # past this symmetric mean distance the one-sided test is not tried
 
@@ -70,6 +70,7 @@ class Evidence:
     slack: float | None = None  # what its tolerances grow with: that edge times its coarsening
     vertex_gap: float | None = None  # 99 % of its vertices within this of the other surface
     uncovered: float | None = None  # 90 % of the other surface within this of it
+    screened: bool = False  # True: ruled out by the invariants (gate.py), no fit made, nothing measured
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -77,8 +78,8 @@ class Evidence:
 
 def relate(a: Prepared, b: Prepared) -> Evidence:
     """The relation of `a` to `b` (module docstring), by whole surfaces first, then by objects."""
-    whole = verify(a, b)
-    if whole.relation != "similar":
+    whole = verify(a, b) if may_relate(a, b) else None  # not at all when the invariants rule it out
+    if whole is not None and whole.relation != "similar":
         return whole
     na, nb = len(a.parts), len(b.parts)
     if nb > 1 and nb > na:
@@ -93,7 +94,13 @@ def relate(a: Prepared, b: Prepared) -> Evidence:
             flipped = None if found.lies_on_other is None else not found.lies_on_other
             return replace(found, relation="contains", forward=found.reverse, reverse=found.forward,
                            scale=scale, transform=inverse.tolist(), lies_on_other=flipped)
-    return whole
+    return whole if whole is not None else UNRELATED
+
+
+# the answer for a pair that gate.may_relate (and, for objects, _parts_in) rules out before any fit:
+# nothing was measured, so the distances are not numbers
+UNRELATED = Evidence("similar", 1.0, float("nan"), float("nan"), float("nan"), float("nan"), 1.0, False,
+                     False, np.eye(4).tolist(), screened=True)
 
 
 def verify(a: Prepared, b: Prepared) -> Evidence:
@@ -283,10 +290,15 @@ def _parts_in(small: Prepared, big: Prepared) -> Evidence | None:
                           - np.array([o.fingerprint for o in big.parts])[None], axis=2)  # (parts, objects)
     if not (gaps <= PART_RADIUS).any(axis=1).all():
         return None  # an object with no object of `big` near enough to be related: nothing to verify
+    # the gate's test per object pair (the resolutions are computed only for pairs within the radius)
+    gaps = np.where([[g <= PART_RADIUS and may_relate(p, o) for g, o in zip(row, big.parts, strict=True)]
+                     for row, p in zip(gaps, parts, strict=True)], gaps, np.inf)
+    if not np.isfinite(gaps).any(axis=1).all():
+        return None
     found: dict[int, list[Evidence]] = {}
     for i in np.argsort(-gaps.min(axis=1)):  # the object least likely to match first: a miss ends it
         row = gaps[i]
-        order = [j for j in np.argsort(row) if row[j] <= PART_RADIUS]  # farther: no relation is possible
+        order = [j for j in np.argsort(row) if np.isfinite(row[j])]  # the others: no relation is possible
         matches: list[Evidence] = []
         for n, j in enumerate(order[: 2 * MAX_PARTS]):
             if not matches and n >= PART_TRIES:
