@@ -60,8 +60,17 @@ def test_a_true_retriangulation_gets_the_fine_fit_and_the_full_samples(monkeypat
     v, f = trimesh.remesh.subdivide(hull.vertices, hull.faces)
     ev = relate(Prepared(Mesh(v, f)), Prepared(hull))
     assert ev.relation == "retriangulated" and ev.chamfer < 1e-3
-    assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS, None]
+    assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS, R.MIDDLE_POINTS, None]
     assert max(c["n"] for c in fits.calls) > R.QUICK_POINTS  # the fine fit was made
+
+
+def test_a_pair_twice_past_the_tolerances_under_the_fine_fit_is_decided_on_a_quarter(monkeypatch) -> None:
+    """Must not match: two random hulls of 200 points, too near for the quick decision; under the fine
+    fit, MIDDLE_POINTS samples put them past MIDDLE_MARGIN and the full samples are not measured."""
+    evidence = Count(monkeypatch, "_evidence")
+    ev = relate(Prepared(_hull(8, n=200)), Prepared(_hull(7, n=200)))
+    assert ev.relation == "similar" and ev.confidence >= 1.0 - 0.5 / R.MIDDLE_MARGIN
+    assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS, R.MIDDLE_POINTS]
 
 
 def test_objects_far_in_fingerprint_are_not_verified(monkeypatch) -> None:
