@@ -199,6 +199,9 @@ def _exact(a: Prepared, b: Prepared, guess: Similarity) -> tuple[Similarity, flo
         return None
     va, vb = a.mesh.vertices, b.mesh.vertices
     fit = guess
+    probe = va[:: max(1, len(va) // 256)]  # every vertex must be near: a few far ones end it cheaply
+    if b.vertex_tree.query(fit.apply(probe), workers=1)[0].max() > 0.02 * b.diagonal:
+        return None
     # float32 files round each coordinate to 2^-24 of its magnitude, text files to a number of decimals
     # (6 in many exporters: 5e-7 absolute, 5e-5 of a 1 cm part in metres); 1e-4 of the size covers both
     for _ in range(EXACT_ROUNDS):  # vertex ICP: from a close guess, the map is right after a round or two
