@@ -111,3 +111,12 @@ def test_vertex_subset_is_an_even_stride_within_the_limit() -> None:
     sub = vertex_subset(mesh, 50)
     assert 25 <= len(sub) <= 50
     assert {tuple(p) for p in sub} <= {tuple(p) for p in mesh.vertices}
+
+
+def test_vertex_subset_of_the_prepared_used_vertices_is_the_same() -> None:
+    mesh = _hull(7, n=400)
+    extra = Mesh(np.vstack([mesh.vertices, [[9.0, 9.0, 9.0]]]), mesh.faces)  # an unused vertex
+    p = Prepared(extra)
+    for limit in (None, 50, 7):
+        assert np.array_equal(vertex_subset(extra, limit, p.used_vertices), vertex_subset(extra, limit))
+    assert [9.0, 9.0, 9.0] not in p.used_vertices.tolist()

@@ -65,6 +65,11 @@ class Prepared:
         return cKDTree(self.normalised_samples)
 
     @cached_property
+    def used_vertices(self) -> np.ndarray:
+        """(u, 3) the vertices some face uses, in index order (onesided.vertex_subset strides them)."""
+        return self.mesh.vertices[np.unique(self.mesh.faces)]
+
+    @cached_property
     def vertex_tree(self) -> cKDTree:
         return cKDTree(self.mesh.vertices)
 

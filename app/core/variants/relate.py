@@ -262,8 +262,10 @@ def _evidence(
     if one_sided and margin >= 1.0 and chamfer < ONE_SIDED_CHAMFER:  # a coarser copy on the finer surface?
         inverse = _inverse(sim)
         on = lies_on(
-            b.distance_to(sim.apply(vertex_subset(a.mesh, points))) / diag, ba / diag, a_edge,
-            a.distance_to(inverse.apply(vertex_subset(b.mesh, points))) * sim.scale / diag, ab / diag, b_edge,
+            b.distance_to(sim.apply(vertex_subset(a.mesh, points, a.used_vertices))) / diag,
+            ba / diag, a_edge,
+            a.distance_to(inverse.apply(vertex_subset(b.mesh, points, b.used_vertices))) * sim.scale / diag,
+            ab / diag, b_edge,
         )
         extra = {"lies_on_other": on.a_on_b, "resolution": on.resolution, "slack": on.slack,
                  "vertex_gap": on.vertex_gap, "uncovered": on.uncovered}
