@@ -88,3 +88,15 @@ def test_true_variants_are_let_through(monkeypatch) -> None:
     finer = hull.subdivide()
     monkeypatch.setattr(G, "SAME_RADIUS", SAME_RADIUS)
     assert relate(_prepared(finer), _prepared(hull)).relation == "retriangulated"
+
+
+def test_a_pair_decided_by_its_objects_is_not_called_screened() -> None:
+    """A hull against a plate of five other hulls: the whole surfaces are ruled out by the gate, the
+    objects are verified and none matches: `similar` with the numbers of an object pair, not the
+    gate's NaNs."""
+    from tests.variant_meshes import hull, plate
+
+    small, big = Prepared(hull(7)), Prepared(plate([hull(s) for s in (20, 21, 22, 23, 24)]))
+    assert not may_relate(small, big) and any(may_relate(small, o) for o in big.parts)  # the premises
+    for ev in (relate(small, big), relate(big, small)):
+        assert ev.relation == "similar" and not ev.screened and np.isfinite(ev.chamfer)

@@ -85,19 +85,24 @@ def relate(a: Prepared, b: Prepared) -> Evidence:
     if whole is not None and whole.relation != "similar":
         return whole
     na, nb = len(a.parts), len(b.parts)
+    found = None  # by objects: a relation, or the `similar` of the object pair that ended the search
     if nb > 1 and nb > na:
         found = _parts_in(a, b)
-        if found is not None:
-            return found
-    if na > 1 and na > nb:
+    elif na > 1 and na > nb:
         found = _parts_in(b, a)
         if found is not None:
-            inverse = np.linalg.inv(np.asarray(found.transform))
-            scale = 1.0 / found.scale
-            flipped = None if found.lies_on_other is None else not found.lies_on_other
-            return replace(found, relation="contains", forward=found.reverse, reverse=found.forward,
-                           scale=scale, transform=inverse.tolist(), lies_on_other=flipped)
-    return whole if whole is not None else UNRELATED
+            found = _seen_from_other(found, "contains" if found.relation == "part_of" else found.relation)
+    if found is not None and found.relation != "similar":
+        return found
+    return whole or found or UNRELATED
+
+
+def _seen_from_other(ev: Evidence, relation: str) -> Evidence:
+    """The evidence of b's relation to a, as a's relation to b: inverse transform and scale."""
+    inverse = np.linalg.inv(np.asarray(ev.transform))
+    flipped = None if ev.lies_on_other is None else not ev.lies_on_other
+    return replace(ev, relation=relation, forward=ev.reverse, reverse=ev.forward, scale=1.0 / ev.scale,
+                   transform=inverse.tolist(), lies_on_other=flipped)
 
 
 # the answer for a pair that gate.may_relate (and, for objects, _parts_in) rules out before any fit:
@@ -296,7 +301,9 @@ def _inverse(sim: Similarity) -> Similarity:
 
 def _parts_in(small: Prepared, big: Prepared) -> Evidence | None:
     """Every object of `small` matched to an object of `big` (whole-surface relation other than
-    similar); the evidence of the largest object's match, with the copies of it that `big` holds."""
+    similar); the evidence of the largest object's match, with the copies of it that `big` holds.
+    Otherwise the `similar` of the first object pair verified for an object that has no match, or
+    None when the fingerprints and the gate rule every pair out (nothing verified)."""
     parts = small.parts[:MAX_PARTS]
     gaps = np.linalg.norm(np.array([p.fingerprint for p in parts])[:, None]
                           - np.array([o.fingerprint for o in big.parts])[None], axis=2)  # (parts, objects)
@@ -312,6 +319,7 @@ def _parts_in(small: Prepared, big: Prepared) -> Evidence | None:
         row = gaps[i]
         order = [j for j in np.argsort(row) if np.isfinite(row[j])]  # the others: no relation is possible
         matches: list[Evidence] = []
+        miss: Evidence | None = None
         for n, j in enumerate(order[: 2 * MAX_PARTS]):
             if not matches and n >= PART_TRIES:
                 break  # its nearest objects are not it: a farther one will not be either
@@ -320,8 +328,10 @@ def _parts_in(small: Prepared, big: Prepared) -> Evidence | None:
                 matches.append(ev)
             elif matches:
                 break  # candidates come nearest first: the copies are together at the front
+            else:
+                miss = miss or ev
         if not matches:
-            return None
+            return miss  # `similar`: the first object pair verified for the object that has no match
         found[int(i)] = matches
     matches = found[0]  # the evidence of the largest object (objects come largest first)
     first = Evidence(**{**matches[0].to_dict(), "copies": len(matches)})
