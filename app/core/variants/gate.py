@@ -2,13 +2,14 @@
 prepared mesh already has (its fingerprint and its resolution), in microseconds.
 
 A fingerprint is area-weighted, so a copy at about the same resolution (the same triangles anywhere,
-a remesh, slight noise, a hole, a moderate decimation) moves it little: on the detection benchmark's
-true variants whose mean edges are within COARSE_RATIO of each other (benchmarks/variants_detect.py,
-both samples), the farthest is at 0.35 (0.31 of it in the area term: noise roughens a fine surface),
-against SAME_RADIUS = 0.5. Only a much coarser copy (a decimation to 10 % has edges about 3 times as
-long) moves it farther, up to about 0.5 on the benchmark, within RADIUS = 1.0 (the lookup's radius).
-So a pair farther than SAME_RADIUS is verified only when one mesh is at least COARSE_RATIO times
-coarser than the other (the true decimations to 10 % that are found are 3.0 or more).
+a remesh, slight noise, a hole, a moderate decimation) moves it little: of the true variants found on
+both samples of the detection benchmark (benchmarks/variants_detect.py) whose resolutions are within
+COARSE_RATIO of each other, the farthest is 0.426 apart (a remesh of trimesh__pyramids.3mf; then 0.35,
+vertex noise roughening a fine surface's area), against SAME_RADIUS = 0.5 (margin 1.17). Only a much
+coarser copy moves it farther: the decimations to 10 % found reach 0.89, within RADIUS = 1.0 (the
+lookup's radius), with edges 3.15 times as long as the original's or more, against COARSE_RATIO = 2
+(margin 1.6). Such a pair can only pass the one-sided test (onesided.py: the coarser mesh lying on
+the finer one), which never passes a mesh of fewer than MIN_VERTICES vertices.
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ import numpy as np
 from app.core.variants.onesided import MIN_VERTICES
 from app.core.variants.prepared import Prepared
 
-RADIUS = 1.0  # fingerprint distance past which no relation is verified (a decimation to 10 % moves ~0.5)
-SAME_RADIUS = 0.5  # ... past which only a much coarser copy is (same-resolution variants: 0.35 at most)
+RADIUS = 1.0  # fingerprint distance past which no relation is verified (a decimation to 10 %: 0.89)
+SAME_RADIUS = 0.5  # ... past which only a much coarser copy is (same-resolution variants: 0.426 at most)
 COARSE_RATIO = 2.0  # "much coarser": mean edge (over the RMS radius) this many times the other's
 
 
