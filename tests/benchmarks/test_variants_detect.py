@@ -15,3 +15,17 @@ def test_kept_surface_counts_by_hand() -> None:
     line = kept_surface(pairs)
     assert "recall 3/5" in line  # every true pair
     assert "without the 2 copies" in line and ": 2/3 (0.667)" in line  # 0.61 and 0.85 left out
+
+
+def test_calibration_puts_the_gate_s_pairs_on_a_row_of_their_own() -> None:
+    from benchmarks.variants_detect import calibration
+
+    def pair(conf: float, got: str, truth: str, screened: bool = False) -> dict:
+        return {"confidence": conf, "got": got, "truth": truth, "looked_up": True, "screened": screened}
+
+    rows = calibration([pair(0.95, "retriangulated", "retriangulated"), pair(0.95, "similar", "moved"),
+                        pair(1.0, "similar", "similar", True), pair(1.0, "similar", "retriangulated", True),
+                        pair(1.0, "similar", "similar", True)])
+    got = [(r["confidence"], r["pairs"]) for r in rows]
+    assert got == [("[0.90, 0.99)", 2), ("ruled out by the gate", 3)]
+    assert rows[0]["right"] == 0.5 and abs(rows[1]["right"] - 2 / 3) < 1e-12

@@ -12,6 +12,7 @@ import trimesh
 
 from app.core.mesh import Mesh
 from app.core.variants import Prepared, relate
+from app.core.variants.gate import may_relate
 from app.core.variants.onesided import vertex_subset
 from tests.variant_meshes import hull as _hull
 from tests.variant_meshes import plate as _plate
@@ -35,13 +36,15 @@ class Count:
 
 
 def test_a_pair_far_from_any_relation_is_decided_on_the_subsample(monkeypatch) -> None:
-    """Must not match: a thin rod against a ball (decided quickly), two different random hulls."""
+    """Must not match: a torus against a box (near enough in fingerprint for the gate to let them
+    through, decided quickly), two different random hulls."""
     fits = Count(monkeypatch, "icp_batch")
     evidence = Count(monkeypatch, "_evidence")
-    rod = trimesh.creation.cylinder(radius=0.05, height=2.0, sections=24)
-    ball = trimesh.creation.icosphere(subdivisions=2)
-    a = Mesh(np.asarray(rod.vertices), np.asarray(rod.faces, np.int64))
-    ev = relate(Prepared(a), Prepared(Mesh(np.asarray(ball.vertices), np.asarray(ball.faces, np.int64))))
+    box = trimesh.creation.box(extents=[1, 2, 3]).subdivide().subdivide()
+    torus = trimesh.creation.torus(1.0, 0.3, major_sections=48, minor_sections=24)
+    a, b = (Prepared(Mesh(np.asarray(t.vertices), np.asarray(t.faces, np.int64))) for t in (torus, box))
+    assert may_relate(a, b)  # the premise: past the invariant gate (gate.py), a fit is made
+    ev = relate(a, b)
     assert ev.relation == "similar"
     assert ev.confidence >= 1.0 - 0.5 / R.QUICK_MARGIN  # its margin on the subsample
     assert fits.calls and max(c["n"] for c in fits.calls) <= R.QUICK_POINTS  # no fine fit made
@@ -57,8 +60,17 @@ def test_a_true_retriangulation_gets_the_fine_fit_and_the_full_samples(monkeypat
     v, f = trimesh.remesh.subdivide(hull.vertices, hull.faces)
     ev = relate(Prepared(Mesh(v, f)), Prepared(hull))
     assert ev.relation == "retriangulated" and ev.chamfer < 1e-3
-    assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS, None]
+    assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS, R.MIDDLE_POINTS, None]
     assert max(c["n"] for c in fits.calls) > R.QUICK_POINTS  # the fine fit was made
+
+
+def test_a_pair_twice_past_the_tolerances_under_the_fine_fit_is_decided_on_a_quarter(monkeypatch) -> None:
+    """Must not match: two random hulls of 200 points, too near for the quick decision; under the fine
+    fit, MIDDLE_POINTS samples put them past MIDDLE_MARGIN and the full samples are not measured."""
+    evidence = Count(monkeypatch, "_evidence")
+    ev = relate(Prepared(_hull(8, n=200)), Prepared(_hull(7, n=200)))
+    assert ev.relation == "similar" and ev.confidence >= 1.0 - 0.5 / R.MIDDLE_MARGIN
+    assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS, R.MIDDLE_POINTS]
 
 
 def test_objects_far_in_fingerprint_are_not_verified(monkeypatch) -> None:
@@ -72,7 +84,8 @@ def test_objects_far_in_fingerprint_are_not_verified(monkeypatch) -> None:
     assert len(big.parts) == 2 and min(gaps) > R.PART_RADIUS  # the premise of the test
     verified = Count(monkeypatch, "verify")
     assert relate(small, big).relation == "similar"
-    assert len(verified.calls) == 1  # the whole surfaces only
+    # the whole surfaces only, and not even those when the gate (gate.py) rules them out
+    assert len(verified.calls) == int(may_relate(small, big))
 
 
 def test_an_object_is_given_up_after_its_nearest_few(monkeypatch) -> None:
@@ -83,9 +96,10 @@ def test_an_object_is_given_up_after_its_nearest_few(monkeypatch) -> None:
     small = Prepared(_hull(7))
     gaps = [np.linalg.norm(small.fingerprint - o.fingerprint) for o in big.parts]
     assert sum(g <= R.PART_RADIUS for g in gaps) > R.PART_TRIES  # more candidates than are tried
+    assert sum(may_relate(small, o) for o in big.parts) > R.PART_TRIES  # ... and past the gate
     verified = Count(monkeypatch, "verify")
     assert relate(small, big).relation == "similar"
-    assert len(verified.calls) == 1 + R.PART_TRIES
+    assert len(verified.calls) == int(may_relate(small, big)) + R.PART_TRIES  # the whole, if at all
     ev = relate(Prepared(_plate([*others, _hull(7), _hull(7)])), small)
     assert (ev.relation, ev.copies) == ("contains", 2)
 
@@ -97,3 +111,12 @@ def test_vertex_subset_is_an_even_stride_within_the_limit() -> None:
     sub = vertex_subset(mesh, 50)
     assert 25 <= len(sub) <= 50
     assert {tuple(p) for p in sub} <= {tuple(p) for p in mesh.vertices}
+
+
+def test_vertex_subset_of_the_prepared_used_vertices_is_the_same() -> None:
+    mesh = _hull(7, n=400)
+    extra = Mesh(np.vstack([mesh.vertices, [[9.0, 9.0, 9.0]]]), mesh.faces)  # an unused vertex
+    p = Prepared(extra)
+    for limit in (None, 50, 7):
+        assert np.array_equal(vertex_subset(extra, limit, p.used_vertices), vertex_subset(extra, limit))
+    assert [9.0, 9.0, 9.0] not in p.used_vertices.tolist()

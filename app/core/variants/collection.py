@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from app.core.variants.gate import RADIUS
 from app.core.variants.index import FingerprintIndex
 from app.core.variants.prepared import Prepared
 from app.core.variants.relate import Evidence, relate
 
 K = 32  # neighbours asked of the index per fingerprint (a model's whole and each of its objects)
-RADIUS = 1.0  # fingerprint distance past which nothing is verified (a decimation to 10 % moves up to ~0.9)
 VERIFY = 5  # candidates verified per model, nearest first ...
 SURE = 0.05  # ... and every one this close, however many (one part on many plates), up to MAX_SURE
 MAX_SURE = 32

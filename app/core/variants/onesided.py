@@ -66,10 +66,11 @@ def mean_edge(mesh: Mesh) -> float:
     return float(np.linalg.norm(tri - tri[:, [1, 2, 0]], axis=2).mean())
 
 
-def vertex_subset(mesh: Mesh, limit: int | None = None) -> np.ndarray:
+def vertex_subset(mesh: Mesh, limit: int | None = None, used: np.ndarray | None = None) -> np.ndarray:
     """(<= limit or MAX_VERTICES, 3) the vertices that some face uses, an even stride through a large
-    mesh."""
-    used = mesh.vertices[np.unique(mesh.faces)]
+    mesh; `used` (u, 3): those vertices when already at hand."""
+    if used is None:
+        used = mesh.vertices[np.unique(mesh.faces)]
     return used[:: max(1, -(-len(used) // (limit or MAX_VERTICES)))]
 
 

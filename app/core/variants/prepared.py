@@ -42,6 +42,11 @@ class Prepared:
         return mean_edge(self.mesh)
 
     @cached_property
+    def resolution(self) -> float:
+        """Mean edge over the RMS radius: how coarse the mesh is, whatever its scale."""
+        return self.mean_edge / self.frame.radius
+
+    @cached_property
     def samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Surface points (N, 3), their unit normals (N, 3) and faces (N,) int."""
         return sample_surface(self.mesh, N_POINTS, seed=1)
@@ -58,6 +63,11 @@ class Prepared:
     @cached_property
     def normalised_tree(self) -> cKDTree:
         return cKDTree(self.normalised_samples)
+
+    @cached_property
+    def used_vertices(self) -> np.ndarray:
+        """(u, 3) the vertices some face uses, in index order (onesided.vertex_subset strides them)."""
+        return self.mesh.vertices[np.unique(self.mesh.faces)]
 
     @cached_property
     def vertex_tree(self) -> cKDTree:

@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from app.core.variants.align import ICP_ITERATIONS, Similarity, hypotheses, icp_batch, to_world, umeyama
+from app.core.variants.gate import RADIUS, may_relate
 from app.core.variants.onesided import cover_margin, lies_on, vertex_subset
 from app.core.variants.prepared import Prepared, face_keys
 
@@ -42,11 +43,13 @@ REFINE = 2  # hypotheses of each handedness polished on FINE_POINTS when the qui
 QUICK_POINTS = 256  # the best fit polished (QUICK_ROUNDS) and the distances measured on this many first ...
 QUICK_ROUNDS = 8
 QUICK_MARGIN = 4.0  # ... and four times past every tolerance there is `similar` without more work
+MIDDLE_POINTS = 512  # after the fine fit, the distances on this many samples first ...
+MIDDLE_MARGIN = 2.0  # ... decide `similar` at twice the tolerances (a subsample's largest distance is
+# never above the full samples', its means and quantiles are within a few per cent of theirs)
 EXACT_ROUNDS = 4
 EXACT_TOL = 1e-4  # same triangles: every vertex within this fraction of the diagonal of its partner
 MAX_PARTS = 8  # objects of a multi-object mesh verified one by one ...
-PART_RADIUS = 1.0  # ... against the objects of the other whose fingerprints are this close (the lookup's
-# radius, collection.RADIUS: a decimation to 10 % moves its fingerprint up to about 0.9), the nearest
+PART_RADIUS = RADIUS  # ... against the objects of the other that gate.may_relate lets through, the nearest
 PART_TRIES = 2  # this many of them tried before an object is given up
 ONE_SIDED_CHAMFER = 0.06  # past this symmetric mean distance the one-sided test is not tried
 
@@ -70,6 +73,7 @@ class Evidence:
     slack: float | None = None  # what its tolerances grow with: that edge times its coarsening
     vertex_gap: float | None = None  # 99 % of its vertices within this of the other surface
     uncovered: float | None = None  # 90 % of the other surface within this of it
+    screened: bool = False  # True: ruled out by the invariants (gate.py), no fit made, nothing measured
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -77,23 +81,34 @@ class Evidence:
 
 def relate(a: Prepared, b: Prepared) -> Evidence:
     """The relation of `a` to `b` (module docstring), by whole surfaces first, then by objects."""
-    whole = verify(a, b)
-    if whole.relation != "similar":
+    whole = verify(a, b) if may_relate(a, b) else None  # not at all when the invariants rule it out
+    if whole is not None and whole.relation != "similar":
         return whole
     na, nb = len(a.parts), len(b.parts)
+    found = None  # by objects: a relation, or the `similar` of the object pair that ended the search
     if nb > 1 and nb > na:
         found = _parts_in(a, b)
-        if found is not None:
-            return found
-    if na > 1 and na > nb:
+    elif na > 1 and na > nb:
         found = _parts_in(b, a)
         if found is not None:
-            inverse = np.linalg.inv(np.asarray(found.transform))
-            scale = 1.0 / found.scale
-            flipped = None if found.lies_on_other is None else not found.lies_on_other
-            return replace(found, relation="contains", forward=found.reverse, reverse=found.forward,
-                           scale=scale, transform=inverse.tolist(), lies_on_other=flipped)
-    return whole
+            found = _seen_from_other(found, "contains" if found.relation == "part_of" else found.relation)
+    if found is not None and found.relation != "similar":
+        return found
+    return whole or found or UNRELATED
+
+
+def _seen_from_other(ev: Evidence, relation: str) -> Evidence:
+    """The evidence of b's relation to a, as a's relation to b: inverse transform and scale."""
+    inverse = np.linalg.inv(np.asarray(ev.transform))
+    flipped = None if ev.lies_on_other is None else not ev.lies_on_other
+    return replace(ev, relation=relation, forward=ev.reverse, reverse=ev.forward, scale=1.0 / ev.scale,
+                   transform=inverse.tolist(), lies_on_other=flipped)
+
+
+# the answer for a pair that gate.may_relate (and, for objects, _parts_in) rules out before any fit:
+# nothing was measured, so the distances are not numbers
+UNRELATED = Evidence("similar", 1.0, float("nan"), float("nan"), float("nan"), float("nan"), 1.0, False,
+                     False, np.eye(4).tolist(), screened=True)
 
 
 def verify(a: Prepared, b: Prepared) -> Evidence:
@@ -134,6 +149,10 @@ def verify(a: Prepared, b: Prepared) -> Evidence:
     exact = _exact(a, b, best) if same_count else None  # the same vertices after all?
     if exact is not None:
         return _exact_evidence(b, *exact)
+    # under the final fit, a quarter of the samples first: twice past every tolerance there is `similar`
+    middle = _evidence(a, b, best, points=MIDDLE_POINTS)
+    if middle.relation == "similar" and middle.confidence >= 1.0 - 0.5 / MIDDLE_MARGIN:
+        return middle
     return _evidence(a, b, best)
 
 
@@ -185,6 +204,9 @@ def _exact(a: Prepared, b: Prepared, guess: Similarity) -> tuple[Similarity, flo
         return None
     va, vb = a.mesh.vertices, b.mesh.vertices
     fit = guess
+    probe = va[:: max(1, len(va) // 256)]  # every vertex must be near: a few far ones end it cheaply
+    if b.vertex_tree.query(fit.apply(probe), workers=1)[0].max() > 0.02 * b.diagonal:
+        return None
     # float32 files round each coordinate to 2^-24 of its magnitude, text files to a number of decimals
     # (6 in many exporters: 5e-7 absolute, 5e-5 of a 1 cm part in metres); 1e-4 of the size covers both
     for _ in range(EXACT_ROUNDS):  # vertex ICP: from a close guess, the map is right after a round or two
@@ -245,8 +267,10 @@ def _evidence(
     if one_sided and margin >= 1.0 and chamfer < ONE_SIDED_CHAMFER:  # a coarser copy on the finer surface?
         inverse = _inverse(sim)
         on = lies_on(
-            b.distance_to(sim.apply(vertex_subset(a.mesh, points))) / diag, ba / diag, a_edge,
-            a.distance_to(inverse.apply(vertex_subset(b.mesh, points))) * sim.scale / diag, ab / diag, b_edge,
+            b.distance_to(sim.apply(vertex_subset(a.mesh, points, a.used_vertices))) / diag,
+            ba / diag, a_edge,
+            a.distance_to(inverse.apply(vertex_subset(b.mesh, points, b.used_vertices))) * sim.scale / diag,
+            ab / diag, b_edge,
         )
         extra = {"lies_on_other": on.a_on_b, "resolution": on.resolution, "slack": on.slack,
                  "vertex_gap": on.vertex_gap, "uncovered": on.uncovered}
@@ -277,17 +301,25 @@ def _inverse(sim: Similarity) -> Similarity:
 
 def _parts_in(small: Prepared, big: Prepared) -> Evidence | None:
     """Every object of `small` matched to an object of `big` (whole-surface relation other than
-    similar); the evidence of the largest object's match, with the copies of it that `big` holds."""
+    similar); the evidence of the largest object's match, with the copies of it that `big` holds.
+    Otherwise the `similar` of the first object pair verified for an object that has no match, or
+    None when the fingerprints and the gate rule every pair out (nothing verified)."""
     parts = small.parts[:MAX_PARTS]
     gaps = np.linalg.norm(np.array([p.fingerprint for p in parts])[:, None]
                           - np.array([o.fingerprint for o in big.parts])[None], axis=2)  # (parts, objects)
     if not (gaps <= PART_RADIUS).any(axis=1).all():
         return None  # an object with no object of `big` near enough to be related: nothing to verify
+    # the gate's test per object pair (the resolutions are computed only for pairs within the radius)
+    gaps = np.where([[g <= PART_RADIUS and may_relate(p, o) for g, o in zip(row, big.parts, strict=True)]
+                     for row, p in zip(gaps, parts, strict=True)], gaps, np.inf)
+    if not np.isfinite(gaps).any(axis=1).all():
+        return None
     found: dict[int, list[Evidence]] = {}
     for i in np.argsort(-gaps.min(axis=1)):  # the object least likely to match first: a miss ends it
         row = gaps[i]
-        order = [j for j in np.argsort(row) if row[j] <= PART_RADIUS]  # farther: no relation is possible
+        order = [j for j in np.argsort(row) if np.isfinite(row[j])]  # the others: no relation is possible
         matches: list[Evidence] = []
+        miss: Evidence | None = None
         for n, j in enumerate(order[: 2 * MAX_PARTS]):
             if not matches and n >= PART_TRIES:
                 break  # its nearest objects are not it: a farther one will not be either
@@ -296,8 +328,10 @@ def _parts_in(small: Prepared, big: Prepared) -> Evidence | None:
                 matches.append(ev)
             elif matches:
                 break  # candidates come nearest first: the copies are together at the front
+            else:
+                miss = miss or ev
         if not matches:
-            return None
+            return miss  # `similar`: the first object pair verified for the object that has no match
         found[int(i)] = matches
     matches = found[0]  # the evidence of the largest object (objects come largest first)
     first = Evidence(**{**matches[0].to_dict(), "copies": len(matches)})

@@ -1,0 +1,102 @@
+"""The invariant gate before any alignment (app/core/variants/gate.py): the thresholds by hand, pairs it
+must rule out without a fit, and true variants it must let through."""
+
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+import pytest
+import trimesh
+
+from app.core.mesh import Mesh
+from app.core.variants import Prepared, relate
+from app.core.variants.gate import COARSE_RATIO, RADIUS, SAME_RADIUS, coarsening, may_relate
+from tests.variant_meshes import hull_trimesh
+
+G = importlib.import_module("app.core.variants.gate")
+R = importlib.import_module("app.core.variants.relate")
+
+
+def _prepared(tm: trimesh.Trimesh) -> Prepared:
+    return Prepared(Mesh(np.asarray(tm.vertices, float), np.asarray(tm.faces, np.int64)))
+
+
+def _posed(fingerprint: np.ndarray, resolution: float, vertices: int = 100) -> Prepared:
+    """A Prepared whose fingerprint and resolution are set by hand (cached properties are plain
+    attributes once set), on a mesh of `vertices` vertices."""
+    p = Prepared(Mesh(np.zeros((vertices, 3)), np.array([[0, 1, 2]])))
+    p.fingerprint = np.asarray(fingerprint, np.float32)
+    p.resolution = resolution
+    return p
+
+
+def test_thresholds_by_hand() -> None:
+    base = np.zeros(17)
+    step = np.eye(17)[0]
+    a = _posed(base, 0.05)
+    assert may_relate(a, _posed(base + 0.9 * SAME_RADIUS * step, 0.05))  # near: always verified
+    # past SAME_RADIUS at one resolution: no relation is possible
+    assert not may_relate(a, _posed(base + 1.1 * SAME_RADIUS * step, 0.05 * 0.9 * COARSE_RATIO))
+    # ... unless one is much coarser (and has enough vertices to lie on the other)
+    assert may_relate(a, _posed(base + 1.1 * SAME_RADIUS * step, 0.05 * 1.1 * COARSE_RATIO))
+    assert may_relate(_posed(base, 0.05 * 1.1 * COARSE_RATIO), _posed(base + 0.99 * RADIUS * step, 0.05))
+    assert not may_relate(a, _posed(base + 1.1 * SAME_RADIUS * step, 0.05 * 3 * COARSE_RATIO, vertices=19))
+    assert not may_relate(a, _posed(base + 1.01 * RADIUS * step, 0.05 * 3 * COARSE_RATIO))  # past the radius
+    assert coarsening(a, _posed(base, 0.2)) == pytest.approx(4.0)
+    assert coarsening(_posed(base, 0.2), a) == pytest.approx(4.0)  # symmetric
+
+
+def test_resolution_is_free_of_scale_and_pose() -> None:
+    torus = trimesh.creation.torus(1.0, 0.3, major_sections=24, minor_sections=12)
+    moved = torus.copy()
+    moved.apply_transform(trimesh.transformations.random_rotation_matrix(np.random.default_rng(3).random(3)))
+    moved.apply_scale(25.4)
+    assert _prepared(moved).resolution == pytest.approx(_prepared(torus).resolution, rel=1e-9)
+
+
+def test_must_not_match_pairs_are_ruled_out_without_a_fit(monkeypatch) -> None:
+    """A torus and a capsule at about one resolution, fingerprints 0.88 apart; a torus and a 17-vertex
+    hull (much coarser, but too few vertices to lie on anything): `similar`, no ICP run."""
+    fits: list[int] = []
+    real = R.icp_batch
+    monkeypatch.setattr(R, "icp_batch", lambda *a, **k: fits.append(1) or real(*a, **k))
+    torus = _prepared(trimesh.creation.torus(1.0, 0.3, major_sections=48, minor_sections=24))
+    capsule = _prepared(trimesh.creation.capsule(height=1.0, radius=0.5, count=[24, 24]))
+    hull = _prepared(hull_trimesh(7))
+    gap = float(np.linalg.norm(torus.fingerprint - capsule.fingerprint))
+    assert SAME_RADIUS < gap <= RADIUS and coarsening(torus, capsule) < COARSE_RATIO  # the premises
+    assert hull.mesh.n_vertices < G.MIN_VERTICES and coarsening(torus, hull) > COARSE_RATIO
+    for a, b in ((torus, capsule), (capsule, torus), (torus, hull), (hull, torus)):
+        ev = relate(a, b)
+        assert ev.relation == "similar" and ev.screened and np.isnan(ev.chamfer)
+    assert not fits
+
+
+def test_true_variants_are_let_through(monkeypatch) -> None:
+    """A coarse icosphere (42 vertices) on a fine one (2,562): near in fingerprint, and let through by
+    the coarse route alone too (SAME_RADIUS set to 0): re-triangulated either way. A subdivided hull
+    (the same surface) is near and kept."""
+    fine = _prepared(trimesh.creation.icosphere(subdivisions=4))
+    coarse = _prepared(trimesh.creation.icosphere(subdivisions=1))
+    assert relate(coarse, fine).relation == "retriangulated"
+    monkeypatch.setattr(G, "SAME_RADIUS", 0.0)
+    assert coarsening(coarse, fine) > COARSE_RATIO and may_relate(coarse, fine)
+    ev = relate(coarse, fine)
+    assert ev.relation == "retriangulated" and not ev.screened
+    hull = hull_trimesh(8)
+    finer = hull.subdivide()
+    monkeypatch.setattr(G, "SAME_RADIUS", SAME_RADIUS)
+    assert relate(_prepared(finer), _prepared(hull)).relation == "retriangulated"
+
+
+def test_a_pair_decided_by_its_objects_is_not_called_screened() -> None:
+    """A hull against a plate of five other hulls: the whole surfaces are ruled out by the gate, the
+    objects are verified and none matches: `similar` with the numbers of an object pair, not the
+    gate's NaNs."""
+    from tests.variant_meshes import hull, plate
+
+    small, big = Prepared(hull(7)), Prepared(plate([hull(s) for s in (20, 21, 22, 23, 24)]))
+    assert not may_relate(small, big) and any(may_relate(small, o) for o in big.parts)  # the premises
+    for ev in (relate(small, big), relate(big, small)):
+        assert ev.relation == "similar" and not ev.screened and np.isfinite(ev.chamfer)
