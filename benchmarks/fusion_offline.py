@@ -31,7 +31,7 @@ import numpy as np
 from app.core import fusion
 from app.core.baselines import euclidean_distance, shape_dna
 from app.core.pipeline import DescribeParams, ShapeDescription
-from app.core.vocabulary import EncodeParams, Vocabulary
+from app.core.vocabulary import EncodeParams, Vocabulary, l1_distance
 from app.evaluation import adaptive, sets
 from app.evaluation.cache import DescriptionCache, Variant
 
@@ -106,11 +106,6 @@ def _masked(d: np.ndarray, col: Column) -> np.ndarray:
     return d
 
 
-def l1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(q, d), (N, d) -> (q, N)."""
-    return np.abs(a[:, None, :] - b[None, :, :]).sum(axis=2)
-
-
 def ranks(d: np.ndarray) -> np.ndarray:
     return np.argsort(np.argsort(d, axis=1, kind="stable"), axis=1, kind="stable").astype(np.float64)
 
@@ -136,7 +131,7 @@ def rules(words: int, stored: float, rule: fusion.AdaptiveRule, n_cand: int) -> 
     def parts(col: Column) -> tuple[np.ndarray, np.ndarray]:
         qb, qd = fusion.split_parts(col.queries, words, stored)
         cb, cd = fusion.split_parts(col.db, words, stored)
-        return _masked(l1(qb, cb), col), _masked(l1(qd, cd), col)
+        return _masked(l1_distance(qb, cb), col), _masked(l1_distance(qd, cd), col)
 
     def local(col: Column, k: int = 10) -> np.ndarray:
         b, d = parts(col)
@@ -147,7 +142,7 @@ def rules(words: int, stored: float, rule: fusion.AdaptiveRule, n_cand: int) -> 
         "BoF": lambda col: parts(col)[0],
         "DNA": lambda col: euclidean_distance(col.query_dna, col.db_dna),
         "DNA part": lambda col: parts(col)[1],
-        "served": lambda col: l1(col.queries, col.db),
+        "served": lambda col: l1_distance(col.queries, col.db),
         "RRF 60": lambda col: -sum(1.0 / (60 + ranks(p)) for p in parts(col)),
         "local 10": local,
         "adaptive/all": lambda col: full_adaptive(col, words, stored, rule),

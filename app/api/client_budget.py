@@ -13,10 +13,11 @@ import re
 from app.api.limits import drain, send_error
 from app.services.clients import ClientOverBudget, reset_client, set_client
 
-# the requests that cost a pool process or an upload: describe, check, explain, render
+# the requests that cost a pool process or an upload (describe, check, explain, render), or several index
+# searches and a read of their candidates' vectors (similar, with the fusion re-rank)
 COSTLY = {
     "POST": re.compile(r"^/(search|models|explain|web/preview\.png)/?$"),
-    "GET": re.compile(r"^/models/[^/]+/(explain|thumbnail\.png)/?$"),
+    "GET": re.compile(r"^/models/[^/]+/(explain|similar|thumbnail\.png)/?$"),
 }
 RETRY_AFTER_S = 2
 DRAIN_BYTES = 1 << 20

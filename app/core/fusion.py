@@ -117,6 +117,11 @@ def fuse(bof: np.ndarray, dna: np.ndarray, scales: FusionScales) -> np.ndarray:
 # (the query averaged with its m nearest), which pulls a noisy query's BoF back towards its class.
 
 
+# each of the re-rank's two index searches returns this many (>= the service's largest k, so every answer
+# comes from their union); the service (services/fusion_rerank) and the evaluation (evaluation/adaptive)
+RERANK_CANDIDATES = 100
+
+
 @dataclass(frozen=True)
 class AdaptiveRule:
     """The query-adaptive re-rank (docs/results.md, issue 30).

@@ -12,7 +12,7 @@ import numpy as np
 
 from app.core import fusion
 
-CANDIDATES = 100  # each of the re-rank's two index searches: the service's fusion_rerank.CANDIDATES
+CANDIDATES = fusion.RERANK_CANDIDATES  # each of the re-rank's two index searches, as served
 
 
 def ranks(

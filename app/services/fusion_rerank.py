@@ -14,12 +14,13 @@ from __future__ import annotations
 import numpy as np
 
 from app.core import fusion
+from app.core.vocabulary import l1_distance
 from app.services.context import ServiceContext
 from app.services.errors import NotReadyError
 from app.services.live_index import LiveIndex
 from app.storage import vocabularies as vocab_repo
 
-CANDIDATES = 100  # each of the two searches; >= search.MAX_K, so every answer comes from the union
+CANDIDATES = fusion.RERANK_CANDIDATES  # each of the two searches; >= search.MAX_K
 RULE = fusion.AdaptiveRule()
 
 
@@ -63,5 +64,5 @@ def search(
                                        max(CANDIDATES, k))
     ids, dist = ids[:k], dist[:k]
     stored = np.stack([seen[int(i)] for i in ids]) if len(ids) else np.zeros((0, len(vector)), np.float32)
-    index_distance = np.abs(stored.astype(np.float64) - np.asarray(vector, np.float64)).sum(axis=1)
+    index_distance = l1_distance(stored, vector[None])[:, 0]  # the query as sent: what the index ranks by
     return index_distance.astype(np.float32), ids, vocabulary_id, dist.astype(np.float32)

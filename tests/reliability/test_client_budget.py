@@ -43,6 +43,7 @@ def test_costly_requests_are_the_pool_and_upload_ones():
         ("POST", "/web/preview.png"),
         ("GET", "/models/3/explain"),
         ("GET", "/models/3/thumbnail.png"),
+        ("GET", "/models/3/similar"),
     ]
     cheap = [
         ("GET", "/models"),
@@ -186,6 +187,7 @@ def test_the_schema_lists_the_429_on_every_costly_operation_only(settings):
         ("/explain", "post"),
         ("/models/{model_id}/explain", "get"),
         ("/models/{model_id}/thumbnail.png", "get"),
+        ("/models/{model_id}/similar", "get"),
     ]
     for path, method in costly:
         answer = paths[path][method]["responses"]["429"]

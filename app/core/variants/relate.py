@@ -307,13 +307,11 @@ def _parts_in(small: Prepared, big: Prepared) -> Evidence | None:
     parts = small.parts[:MAX_PARTS]
     gaps = np.linalg.norm(np.array([p.fingerprint for p in parts])[:, None]
                           - np.array([o.fingerprint for o in big.parts])[None], axis=2)  # (parts, objects)
-    if not (gaps <= PART_RADIUS).any(axis=1).all():
-        return None  # an object with no object of `big` near enough to be related: nothing to verify
-    # the gate's test per object pair (the resolutions are computed only for pairs within the radius)
+    # the gate's test per object pair (resolutions are computed only for pairs within the radius)
     gaps = np.where([[g <= PART_RADIUS and may_relate(p, o) for g, o in zip(row, big.parts, strict=True)]
                      for row, p in zip(gaps, parts, strict=True)], gaps, np.inf)
     if not np.isfinite(gaps).any(axis=1).all():
-        return None
+        return None  # an object with no object of `big` it may be related to: nothing to verify
     found: dict[int, list[Evidence]] = {}
     for i in np.argsort(-gaps.min(axis=1)):  # the object least likely to match first: a miss ends it
         row = gaps[i]
