@@ -7,7 +7,8 @@
 
 The realworld corpus has no labels, but each readable file can be asked to find itself. Two copies of
 every file query the collection of originals, encoded with the shipped vocabulary as the service
-encodes them (its recorded encoding, fused when it has fusion scales):
+encodes them (its recorded encoding, fused when it has fusion scales), ranked by the index's L1 and by
+the query-adaptive fusion re-rank the service serves (SHAPEBAG_FUSION_RERANK):
 - re-triangulated: `benchmarks.variants.retriangulate` (midpoint-subdivided to >= 16k vertices, then
   quadric-decimated to a random 1k-8k): the same surface, another mesh;
 - noisy: Gaussian vertex noise, NSR 0.01 (`resolution.perturb`, as `evaluate --noise`).
@@ -61,11 +62,18 @@ def _describe_copies(entry: str, params_kwargs: dict, seed: int) -> dict | None:
     return out
 
 
-def scores(queries: np.ndarray, originals: np.ndarray) -> dict[str, float]:
-    """Query i's own original is originals[i]. queries, originals (n, d) -> NN, MRR, top 5."""
+def scores(queries: np.ndarray, originals: np.ndarray,
+           rerank: tuple[int, float] | None = None) -> dict[str, float]:
+    """Query i's own original is originals[i]. queries, originals (n, d) -> NN, MRR, top 5.
+    rerank (words, stored Shape-DNA weight): ranked as the service's query-adaptive fusion re-rank
+    ranks fused vectors (app.evaluation.adaptive), not by the index's L1."""
     from app.core.vocabulary import l1_distance
+    from app.evaluation import adaptive
 
-    d = l1_distance(queries, originals)  # (n, n)
+    if rerank is None:
+        d = l1_distance(queries, originals)  # (n, n)
+    else:  # each original's place in each copy's list
+        d = adaptive.ranks(queries, originals, np.full(len(queries), -1), *rerank)
     own = np.diagonal(d)[:, None]
     rank = 1 + (d < own).sum(axis=1)  # ties count in the copy's favour, as FAISS's order may
     return {"NN": float(np.mean(rank == 1)), "MRR": float(np.mean(1.0 / rank)),
@@ -87,10 +95,16 @@ def run(patterns: list[str], jobs: int, params_kwargs: dict, seed: int,
     recorded = vocab.metadata.get("encode", {})
     fused = EncodeParams().with_encoding(recorded)
     lines = {}
-    for label, enc in (("pure BoF", replace(fused, fusion=False)), ("fused (served)", fused)):
+    rerank = (vocab.size, vocab.fusion.weight) if vocab.fusion is not None and fused.fusion else None
+    for label, enc, order in (("pure BoF", replace(fused, fusion=False), None),
+                              ("fused, index order", fused, None),
+                              ("fused (served)", fused, rerank)):
+        if label == "fused (served)" and order is None:
+            continue  # pure-BoF vocabulary: the index's order is what is served
         originals = np.stack([vocab.encode(r["original"], enc) for r in ok])
         for copy in ("retriangulated", "noisy"):
-            lines[(label, copy)] = scores(np.stack([vocab.encode(r[copy], enc) for r in ok]), originals)
+            queries = np.stack([vocab.encode(r[copy], enc) for r in ok])
+            lines[(label, copy)] = scores(queries, originals, order)
     return {"files": len(ok), "refused": len(entries) - len(described), "failed": [(r["name"], r["error"])
             for r in failed], "describe": params_kwargs, "seed": seed,
             "vocabulary": str(vocabulary or "shipped"),

@@ -116,6 +116,16 @@ def test_self_retrieval_scores_ranks_by_l1_with_ties_for_the_copy():
     assert s["top5"] == 1.0
 
 
+def test_self_retrieval_under_the_rerank_ranks_exact_copies_first_and_a_moved_copy_not():
+    rng = np.random.default_rng(0)
+    originals = rng.random((12, 6))  # fused layout: 4 BoF words, then 2 Shape-DNA entries (weight 1)
+    assert selfretrieval.scores(originals.copy(), originals, (4, 1.0))["NN"] == 1.0
+    far = originals.copy()
+    far[0] += 100.0  # copy 0 left every original: nearer to the originals with larger entries than its own
+    s = selfretrieval.scores(far, originals, (4, 1.0))
+    assert s["NN"] == pytest.approx(11 / 12) and s["MRR"] < 1.0
+
+
 @pytest.mark.slow
 @needs_corpus
 def test_self_retrieval_benchmark_finds_copies_and_records_the_setting(tmp_path, capsys):
