@@ -59,6 +59,7 @@ class Column:
     queries: np.ndarray  # (q, v + c)
     db_dna: np.ndarray  # (N, c) raw Shape-DNA (the evaluate line's L2)
     query_dna: np.ndarray  # (q, c)
+    query_rims: np.ndarray  # (q,) free boundary over √area (NaN: no local signature)
 
 
 def _load(folder: sets.Folder, cache: Path, variant: Variant, vocab: Vocabulary) -> tuple | None:
@@ -69,7 +70,7 @@ def _load(folder: sets.Folder, cache: Path, variant: Variant, vocab: Vocabulary)
         return None
     descs = [ShapeDescription.load(p) for p in paths]
     fused = np.stack([vocab.encode(d, EncodeParams()) for d in descs])
-    return fused, np.stack([shape_dna(d.eigenvalues) for d in descs])
+    return fused, np.stack([shape_dna(d.eigenvalues) for d in descs]), adaptive.rims_of(descs)
 
 
 def load_column(spec: str, cache: Path, vocab: Vocabulary) -> Column | None:
@@ -86,11 +87,11 @@ def load_column(spec: str, cache: Path, vocab: Vocabulary) -> Column | None:
         if q is None:
             return None
         pairs = sets.counterparts(folder, other)
-        return Column(spec, folder.labels, other.labels, pairs, base[0], q[0], base[1], q[1])
+        return Column(spec, folder.labels, other.labels, pairs, base[0], q[0], base[1], q[1], q[2])
     q = _load(folder, cache, Variant(float(noise), 0), vocab) if noise else base
     if q is None:
         return None
-    return Column(spec, folder.labels, folder.labels, np.arange(n), base[0], q[0], base[1], q[1])
+    return Column(spec, folder.labels, folder.labels, np.arange(n), base[0], q[0], base[1], q[1], q[2])
 
 
 def scores(distances: np.ndarray, col: Column) -> tuple[float, float]:
@@ -114,7 +115,8 @@ def served_adaptive(
     col: Column, words: int, stored: float, rule: fusion.AdaptiveRule, n_cand: int
 ) -> np.ndarray:
     """(q, N) as served (app.evaluation.adaptive: brute-force L1 for the index)."""
-    return _masked(adaptive.ranks(col.queries, col.db, col.left_out, words, stored, rule, n_cand), col)
+    return _masked(adaptive.ranks(col.queries, col.db, col.left_out, words, stored, rule, n_cand,
+                                  col.query_rims), col)
 
 
 def full_adaptive(col: Column, words: int, stored: float, rule: fusion.AdaptiveRule) -> np.ndarray:
@@ -122,7 +124,7 @@ def full_adaptive(col: Column, words: int, stored: float, rule: fusion.AdaptiveR
     out = np.empty((len(col.queries), len(col.db)))
     for i, q in enumerate(col.queries):
         keep = np.setdiff1d(np.arange(len(col.db)), [col.left_out[i]])
-        w, expanded = fusion.adaptive_query(q, col.db[keep], words, stored, rule)
+        w, expanded = fusion.adaptive_query(q, col.db[keep], words, stored, rule, float(col.query_rims[i]))
         out[i, keep] = fusion.adaptive_distances(expanded, w, col.db[keep], words, stored)
     return _masked(out, col)
 

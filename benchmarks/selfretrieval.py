@@ -62,18 +62,23 @@ def _describe_copies(entry: str, params_kwargs: dict, seed: int) -> dict | None:
     return out
 
 
+def _rim(description) -> float:
+    """The description's free boundary over √area (NaN without a local signature)."""
+    return float("nan") if description.local is None else float(description.local.rim)
+
+
 def scores(queries: np.ndarray, originals: np.ndarray,
-           rerank: tuple[int, float] | None = None) -> dict[str, float]:
+           rerank: tuple[int, float] | None = None, rims: np.ndarray | None = None) -> dict[str, float]:
     """Query i's own original is originals[i]. queries, originals (n, d) -> NN, MRR, top 5.
     rerank (words, stored Shape-DNA weight): ranked as the service's query-adaptive fusion re-rank
-    ranks fused vectors (app.evaluation.adaptive), not by the index's L1."""
+    ranks fused vectors (app.evaluation.adaptive), not by the index's L1, with the queries' rims (q,)."""
     from app.core.vocabulary import l1_distance
     from app.evaluation import adaptive
 
     if rerank is None:
         d = l1_distance(queries, originals)  # (n, n)
     else:  # each original's place in each copy's list
-        d = adaptive.ranks(queries, originals, np.full(len(queries), -1), *rerank)
+        d = adaptive.ranks(queries, originals, np.full(len(queries), -1), *rerank, rims=rims)
     own = np.diagonal(d)[:, None]
     rank = 1 + (d < own).sum(axis=1)  # ties count in the copy's favour, as FAISS's order may
     return {"NN": float(np.mean(rank == 1)), "MRR": float(np.mean(1.0 / rank)),
@@ -81,7 +86,7 @@ def scores(queries: np.ndarray, originals: np.ndarray,
 
 
 def run(patterns: list[str], jobs: int, params_kwargs: dict, seed: int,
-        vocabulary: Path | None = None) -> dict:
+        vocabulary: Path | None = None, save: Path | None = None) -> dict:
     from app.config import SHIPPED_VOCABULARY
     from app.core.vocabulary import EncodeParams, Vocabulary
 
@@ -94,6 +99,14 @@ def run(patterns: list[str], jobs: int, params_kwargs: dict, seed: int,
     vocab = Vocabulary.load(vocabulary or SHIPPED_VOCABULARY)
     recorded = vocab.metadata.get("encode", {})
     fused = EncodeParams().with_encoding(recorded)
+    if save is not None:  # the served encoding of every copy, to score ranking rules without describing
+        save.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(save, names=np.array([r["name"] for r in ok]), words=vocab.size,
+                            stored_weight=vocab.fusion.weight if vocab.fusion is not None else 0.0,
+                            **{c: np.stack([vocab.encode(r[c], fused) for r in ok])
+                               for c in ("original", "retriangulated", "noisy")},
+                            **{f"rim_{c}": np.array([_rim(r[c]) for r in ok])
+                               for c in ("original", "retriangulated", "noisy")})
     lines = {}
     rerank = (vocab.size, vocab.fusion.weight) if vocab.fusion is not None and fused.fusion else None
     for label, enc, order in (("pure BoF", replace(fused, fusion=False), None),
@@ -104,7 +117,8 @@ def run(patterns: list[str], jobs: int, params_kwargs: dict, seed: int,
         originals = np.stack([vocab.encode(r["original"], enc) for r in ok])
         for copy in ("retriangulated", "noisy"):
             queries = np.stack([vocab.encode(r[copy], enc) for r in ok])
-            lines[(label, copy)] = scores(queries, originals, order)
+            rims = np.array([_rim(r[copy]) for r in ok])
+            lines[(label, copy)] = scores(queries, originals, order, rims)
     return {"files": len(ok), "refused": len(entries) - len(described), "failed": [(r["name"], r["error"])
             for r in failed], "describe": params_kwargs, "seed": seed,
             "vocabulary": str(vocabulary or "shipped"),
@@ -123,10 +137,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--vocabulary", type=Path, default=None,
                     help="a vocabulary directory (default: the shipped)")
     ap.add_argument("--name", default="selfretrieval", help="results/<name>.json")
+    ap.add_argument("--save", type=Path, default=None,
+                    help="also write the served (fused) vectors of the originals and copies to this .npz")
     a = ap.parse_args(argv)
     overrides = {k: v for k, v in (("fill_holes", a.fill_holes), ("smoothing", a.smoothing),
                                    ("antialias", a.antialias)) if v is not None}
-    result = run(a.files or [], a.jobs, overrides, a.seed, a.vocabulary)
+    result = run(a.files or [], a.jobs, overrides, a.seed, a.vocabulary, a.save)
     rows = [{"encoding | copy": name, "NN": v["NN"], "MRR": v["MRR"], "top 5": v["top5"]}
             for name, v in result["lines"].items()]
     print(table(rows))

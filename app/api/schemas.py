@@ -152,8 +152,9 @@ class SearchHit(BaseModel):
     rank: int
     rerank_distance: float | None = Field(
         None, description="the query-adaptive fusion's distance, which whole-shape hits are ordered by when"
-        " the vectors are fused (SHAPEBAG_FUSION_RERANK, on by default); null when the index's L1 order is"
-        " served (a piece, pure BoF, or the re-rank turned off)"
+        " the vectors are fused (SHAPEBAG_FUSION_RERANK, on by default), but for a distinct nearest match"
+        " (index distance under 0.9 times the second's), which stays first whatever its own; null when the"
+        " index's L1 order is served (a piece, pure BoF, or the re-rank turned off)"
     )
     forward: float | None = Field(
         None, ge=0.0, le=1.0, description="share of the query's surface found in the model (partial matching;"

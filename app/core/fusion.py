@@ -115,6 +115,11 @@ def fuse(bof: np.ndarray, dna: np.ndarray, scales: FusionScales) -> np.ndarray:
 # agree with the *other* part: the k nearest by BoF are a tight group in Shape-DNA distance when the BoF
 # found the query's class, and the reverse. The weight then drives one step of query expansion
 # (the query averaged with its m nearest), which pulls a noisy query's BoF back towards its class.
+# A closed query never weighs its Shape-DNA less than the fixed fusion does: the spectrum of a closed
+# surface has no boundary condition, while an open one's (a scan, a cut) moves with where the surface
+# stops, so only an open query starts from the lower weight. A distinct nearest match (by the index's
+# fused L1, well nearer than the second: Lowe's ratio test) stays first: the expansion reorders a
+# query's class, and must not demote a copy of the query for looking unlike its neighbours.
 
 
 # each of the re-rank's two index searches returns this many (>= the service's largest k, so every answer
@@ -131,6 +136,11 @@ class AdaptiveRule:
     power      : p
     neighbours : k, each part's nearest neighbours whose agreement is measured
     expansion  : m, nearest candidates averaged into the query before the final ranking (0: none)
+    closed_weight : the least weight of a closed query (the fixed fusion's weight, DEFAULT_WEIGHT)
+    closed_rim : a query whose rim (free boundary length / √area, app.core.partial.rim_length) is at
+                 most this is closed; the same rankings at 0 and 0.05 on every column (docs/results.md)
+    distinct   : the index's nearest stays first when its fused L1 is below this share of the second
+                 nearest's (0: never); 0.8, 0.9 and 0.95 rank every column alike (docs/results.md)
     """
 
     weight: float = 0.4
@@ -138,10 +148,14 @@ class AdaptiveRule:
     power: float = 3.0
     neighbours: int = 10
     expansion: int = 2
+    closed_weight: float = DEFAULT_WEIGHT
+    closed_rim: float = 0.05
+    distinct: float = 0.9
 
     def __post_init__(self) -> None:
         if not (self.weight > 0 and self.pivot > 0 and self.power >= 0 and self.neighbours >= 2
-                and self.expansion >= 0):
+                and self.expansion >= 0 and self.closed_weight >= 0 and self.closed_rim >= 0
+                and 0 <= self.distinct <= 1):
             raise ValueError(f"invalid adaptive fusion rule: {self}")
 
 
@@ -182,20 +196,27 @@ def agreement(b: np.ndarray, d: np.ndarray, bofs: np.ndarray, dnas: np.ndarray, 
     return (spreads[0] / spreads[1]) / (spreads[2] / spreads[3])
 
 
-def query_weight(r: float, rule: AdaptiveRule) -> float:
-    """w = w0 · max(1, τ / r)^p: the Shape-DNA's weight for one query."""
-    return rule.weight * max(1.0, rule.pivot / r) ** rule.power
+def is_closed(rim: float | None, rule: AdaptiveRule) -> bool:
+    """Whether a query with this rim is closed; unknown (None, NaN: no local signature) is not."""
+    return rim is not None and bool(rim <= rule.closed_rim)
+
+
+def query_weight(r: float, rule: AdaptiveRule, rim: float | None = None) -> float:
+    """w = w0 · max(1, τ / r)^p, at least closed_weight for a closed query: the Shape-DNA's weight."""
+    w = rule.weight * max(1.0, rule.pivot / r) ** rule.power
+    return max(w, rule.closed_weight) if is_closed(rim, rule) else w
 
 
 def adaptive_query(
-    query: np.ndarray, candidates: np.ndarray, words: int, stored_weight: float, rule: AdaptiveRule
+    query: np.ndarray, candidates: np.ndarray, words: int, stored_weight: float, rule: AdaptiveRule,
+    rim: float | None = None,
 ) -> tuple[float, np.ndarray]:
     """query (v + c,) fused, candidates (n, v + c) its nearest stored vectors (the query itself
-    excluded) -> (w, expanded query (v + c,) in the same fused layout)."""
+    excluded), rim the query's (None: unknown) -> (w, expanded query (v + c,) in the same fused layout)."""
     qb, qd = split_parts(query, words, stored_weight)
     cb, cd = split_parts(candidates, words, stored_weight)
     b, d = _l1(qb, cb), _l1(qd, cd)
-    w = query_weight(agreement(b, d, cb, cd, rule.neighbours), rule)
+    w = query_weight(agreement(b, d, cb, cd, rule.neighbours), rule, rim)
     m = min(rule.expansion, len(b))
     if m == 0:
         return w, np.asarray(query, dtype=np.float32)
@@ -217,7 +238,7 @@ def adaptive_rerank(
     query: np.ndarray,
     search: Callable[[np.ndarray, int], np.ndarray],
     vectors_of: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
-    words: int, stored_weight: float, rule: AdaptiveRule, candidates: int,
+    words: int, stored_weight: float, rule: AdaptiveRule, candidates: int, rim: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The served re-rank: the fused index searched for the query's `candidates` nearest, the weight and
     the expanded query found among them, the index searched again for the expanded query, and the union
@@ -227,12 +248,28 @@ def adaptive_rerank(
     search     : (vector, n) -> ids (<= n,) of the n nearest by the index's fused L1 (the query's own
                  stored copy left out by the caller when it must be)
     vectors_of : ids (n,) -> (ids kept (n',), their stored fused vectors (n', v + c))
-    -> ids (u,) and their distances (u,), ascending (ties in id order)."""
+    rim        : the query's free boundary over √area (None: unknown, weighed as open)
+    -> ids (u,) and their distances (u,), ascending (ties in id order) but for a distinct nearest
+    match, which comes first with its own distance (distinct_first)."""
     ids, vectors = vectors_of(search(query, candidates))
     if len(ids) == 0:
         return np.zeros(0, np.int64), np.zeros(0)
-    w, expanded = adaptive_query(query, vectors, words, stored_weight, rule)
-    union, vectors = vectors_of(np.union1d(ids, search(expanded, candidates)))
-    dist = adaptive_distances(expanded, w, vectors, words, stored_weight)
+    w, expanded = adaptive_query(query, vectors, words, stored_weight, rule, rim)
+    union, union_vectors = vectors_of(np.union1d(ids, search(expanded, candidates)))
+    dist = adaptive_distances(expanded, w, union_vectors, words, stored_weight)
     order = np.argsort(dist, kind="stable")
+    first = distinct_first(_l1(np.asarray(query, np.float64), np.asarray(vectors, np.float64)), rule.distinct)
+    if first is not None and ids[first] in union:
+        at = int(np.flatnonzero(union[order] == ids[first])[0])
+        order = np.concatenate([order[at:at + 1], order[:at], order[at + 1:]])
     return union[order], dist[order]
+
+
+def distinct_first(index_distances: np.ndarray, ratio: float) -> int | None:
+    """Index (into index_distances (n,)) of the nearest when it is under `ratio` times the second
+    nearest (Lowe's ratio test), else None; None with fewer than two."""
+    if len(index_distances) < 2 or ratio <= 0:
+        return None
+    two = np.argsort(index_distances, kind="stable")[:2]
+    d1, d2 = index_distances[two]
+    return int(two[0]) if d1 < ratio * d2 else None

@@ -11,17 +11,19 @@ from __future__ import annotations
 import numpy as np
 
 from app.core import fusion
+from app.core.pipeline import ShapeDescription
 
 CANDIDATES = fusion.RERANK_CANDIDATES  # each of the re-rank's two index searches, as served
 
 
 def ranks(
     queries: np.ndarray, db: np.ndarray, left_out: np.ndarray, words: int, stored_weight: float,
-    rule: fusion.AdaptiveRule | None = None, candidates: int = CANDIDATES,
+    rule: fusion.AdaptiveRule | None = None, candidates: int = CANDIDATES, rims: np.ndarray | None = None,
 ) -> np.ndarray:
     """queries (q, v + c), db (N, v + c) fused vectors; left_out (q,) the database index each query must
-    not see (its own or clean copy), or -1 -> (q, N) float64 rank of each shape in each query's list
-    (the left-out shape last), usable as a distance matrix by app.core.metrics and evaluation.sets."""
+    not see (its own or clean copy), or -1; rims (q,) each query's rim (NaN or None: unknown) -> (q, N)
+    float64 rank of each shape in each query's list (the left-out shape last), usable as a distance
+    matrix by app.core.metrics and evaluation.sets."""
     rule = rule or fusion.AdaptiveRule()
     db = np.asarray(db, dtype=np.float32)
     out = np.empty((len(queries), len(db)))
@@ -35,11 +37,17 @@ def ranks(
             near = np.argsort(d, kind="stable")[:n]
             return near[np.isfinite(d[near])]
 
+        rim = None if rims is None else float(rims[i])
         ids, _ = fusion.adaptive_rerank(query, search, lambda j: (j, db[j]), words, stored_weight, rule,
-                                        candidates)
+                                        candidates, rim)
         served = np.abs(db - query).sum(axis=1, dtype=np.float64)
         if skip >= 0:
             served[skip] = np.inf
         rest = np.setdiff1d(np.argsort(served, kind="stable"), ids, assume_unique=True)
         out[i, np.concatenate([ids, rest])] = np.arange(len(db))
     return out
+
+
+def rims_of(descriptions: list[ShapeDescription]) -> np.ndarray:
+    """(n,) each description's rim (free boundary over √area), NaN where it has no local signature."""
+    return np.array([np.nan if d.local is None else float(d.local.rim) for d in descriptions])

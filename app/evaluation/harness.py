@@ -245,17 +245,18 @@ def _adaptive_lines(
     if scales is None or scales.weight <= 0:
         return []
     db_vec = np.stack([vocab.encode(d, params) for d in db])
-    sets_: list[tuple[np.ndarray, np.ndarray, np.ndarray, CrossSet | None]] = [
-        (db_vec, labels, np.arange(len(db)), None)]
+    sets_: list[tuple[list[ShapeDescription], np.ndarray, np.ndarray, CrossSet | None]] = [
+        (db, labels, np.arange(len(db)), None)]
     if queries is not None:
-        sets_.append((np.stack([vocab.encode(d, params) for d in queries]), labels, np.arange(len(db)), None))
+        sets_.append((queries, labels, np.arange(len(db)), None))
     if other is not None:
-        sets_.append((np.stack([vocab.encode(d, params) for d in other.descriptions]), other.labels,
-                      other.pairs, other))
+        sets_.append((other.descriptions, other.labels, other.pairs, other))
     out = []
-    for line, (q_vec, q_labels, left_out, cross) in zip(fixed, sets_, strict=True):
+    for line, (q_descs, q_labels, left_out, cross) in zip(fixed, sets_, strict=True):
         t0 = time.perf_counter()
-        rank = adaptive.ranks(q_vec, db_vec, left_out, vocab.size, scales.weight)
+        q_vec = np.stack([vocab.encode(d, params) for d in q_descs])
+        rims = adaptive.rims_of(q_descs)  # a closed query weighs its Shape-DNA as the fixed fusion at least
+        rank = adaptive.ranks(q_vec, db_vec, left_out, vocab.size, scales.weight, rims=rims)
         if cross is None:
             scores = metrics.retrieval_scores(rank, labels)
         else:

@@ -35,11 +35,12 @@ def applies(ctx: ServiceContext, live: LiveIndex) -> bool:
 
 def search(
     ctx: ServiceContext, live: LiveIndex, vector: np.ndarray, k: int, allowed: np.ndarray | None,
-    vocabulary_id: int, exclude: int | None = None,
+    vocabulary_id: int, exclude: int | None = None, rim: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
     """vector (v + c,) fused -> the index's fused L1 distances (<= k,) of the ids (<= k,) in re-ranked
     order, the version that answered, and the re-rank's distances (<= k,, ascending).
-    `exclude`: a stored model left out (the one whose neighbours are asked)."""
+    `exclude`: a stored model left out (the one whose neighbours are asked); `rim`: the query's free
+    boundary over √area (None: unknown, weighed as an open surface)."""
     pair = live.require()
     if pair.record.id != vocabulary_id or pair.vocabulary.fusion is None:
         raise NotReadyError("the vocabulary changed while the query was encoded; retry")
@@ -61,7 +62,7 @@ def search(
         return kept, (np.stack(rows) if rows else np.zeros((0, len(vector)), np.float32))
 
     ids, dist = fusion.adaptive_rerank(vector, nearest, vectors_of, pair.vocabulary.size, scales.weight, RULE,
-                                       max(CANDIDATES, k))
+                                       max(CANDIDATES, k), rim)
     ids, dist = ids[:k], dist[:k]
     stored = np.stack([seen[int(i)] for i in ids]) if len(ids) else np.zeros((0, len(vector)), np.float32)
     index_distance = l1_distance(stored, vector[None])[:, 0]  # the query as sent: what the index ranks by

@@ -74,6 +74,11 @@ class LocalCache:
 _CACHE = LocalCache()
 
 
+def local_of(ctx: ServiceContext, model_id: int) -> LocalSignature | None:
+    """A stored model's local signature (None: none stored, or unreadable), through the LRU."""
+    return _CACHE.get(ctx.blobs.description_path(model_id))
+
+
 def is_partial(query: LocalSignature | None, requested: bool | None) -> bool:
     """The caller's choice when given, else whether the query has a rim."""
     if requested is not None:

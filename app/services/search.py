@@ -83,7 +83,9 @@ def search_description(
         rerank = None
         try:
             if not piece and fusion_rerank.applies(ctx, live):  # a piece is re-ranked by its rim instead
-                dist, ids, vid, rerank = fusion_rerank.search(ctx, live, vector, wanted, allowed, vid)
+                rim = None if description.local is None else description.local.rim
+                dist, ids, vid, rerank = fusion_rerank.search(ctx, live, vector, wanted, allowed, vid,
+                                                              rim=rim)
             else:
                 dist, ids, vid = live.search(vector, wanted, allowed, vocabulary_id=vid)
         except NotReadyError:
@@ -137,8 +139,9 @@ def similar(
         rerank = None
         try:
             if fusion_rerank.applies(ctx, live):
+                local = partial_mod.local_of(ctx, model_id)  # its rim: closed or open (core.fusion)
                 dist, ids, vid, rerank = fusion_rerank.search(ctx, live, vector, k, allowed, pair.record.id,
-                                                              model_id)
+                                                              model_id, None if local is None else local.rim)
             else:
                 dist, ids, vid = live.search(vector, k + 1, allowed, vocabulary_id=pair.record.id)
         except NotReadyError:

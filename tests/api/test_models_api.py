@@ -60,7 +60,8 @@ def test_upload_ingest_search_duplicate_and_delete(data_dir, corpus):
         assert [h["rank"] for h in result["data"]] == list(range(1, len(result["data"]) + 1))
         # ordered by the fusion re-rank's distance (on by default); distance stays the index's L1
         assert all(h["rerank_distance"] is not None for h in result["data"])
-        assert np.all(np.diff([h["rerank_distance"] for h in result["data"]]) >= 0)
+        # (the first, a stored copy at 0, is a distinct nearest match: first whatever its re-rank distance)
+        assert np.all(np.diff([h["rerank_distance"] for h in result["data"][1:]]) >= 0)
         assert result["seconds"]["describe"] > 0 and "search" in result["seconds"]
 
         # label filter

@@ -12,7 +12,9 @@ from app.core.fusion import (
     adaptive_query,
     adaptive_rerank,
     agreement,
+    distinct_first,
     fuse,
+    is_closed,
     query_weight,
     split_parts,
 )
@@ -66,8 +68,33 @@ def test_query_weight_rises_only_below_the_pivot():
     assert query_weight(0.45, rule) == pytest.approx(0.4 * 2**3)
 
 
+def test_a_closed_query_weighs_its_shape_dna_at_least_as_the_fixed_fusion():
+    rule = AdaptiveRule(weight=0.4, pivot=0.9, power=3.0, closed_weight=1.0, closed_rim=0.05)
+    assert query_weight(0.9, rule, rim=0.0) == pytest.approx(1.0)  # closed: the floor, not w0
+    assert query_weight(0.9, rule, rim=0.05) == pytest.approx(1.0)  # at the threshold: closed
+    assert query_weight(0.45, rule, rim=0.0) == pytest.approx(0.4 * 2**3)  # above the floor: unchanged
+    assert query_weight(0.9, rule, rim=0.3) == pytest.approx(0.4)  # open: w0
+    assert query_weight(0.9, rule, rim=None) == pytest.approx(0.4)  # unknown (no local signature): open
+    assert query_weight(0.9, rule, rim=float("nan")) == pytest.approx(0.4)
+    assert is_closed(0.0, rule) and not is_closed(0.051, rule) and not is_closed(None, rule)
+
+
+def test_a_closed_querys_floor_changes_the_ranking_where_the_shape_dna_disagrees():
+    """Candidate 0 is nearer by BoF, candidate 1 by Shape-DNA (both parts over their scales): at w0 = 0.4
+    the BoF leads (0 + 0.4 × 2 < 1 + 0.4 × 0); a closed query's w = 1 puts candidate 1 first (2 > 1)."""
+    cands = np.array([[0.0, 2.0], [1.0, 0.0], [9.0, 9.0], [9.5, 9.5]], np.float32)  # stored weight 1
+    query = np.zeros(2, np.float32)
+    rule = AdaptiveRule(weight=0.4, neighbours=2, expansion=0)
+    w_open, e = adaptive_query(query, cands, 1, 1.0, rule, rim=0.5)
+    w_closed, _ = adaptive_query(query, cands, 1, 1.0, rule, rim=0.0)
+    assert w_open < 1.0 <= w_closed
+    assert np.argmin(adaptive_distances(e, w_open, cands, 1, 1.0)) == 0
+    assert np.argmin(adaptive_distances(e, w_closed, cands, 1, 1.0)) == 1
+
+
 @pytest.mark.parametrize("bad", [dict(weight=0), dict(pivot=0), dict(power=-1), dict(neighbours=1),
-                                 dict(expansion=-1)])
+                                 dict(expansion=-1), dict(closed_weight=-1), dict(closed_rim=-0.1),
+                                 dict(distinct=-0.1), dict(distinct=1.5)])
 def test_rule_validation(bad):
     with pytest.raises(ValueError, match="invalid adaptive fusion rule"):
         AdaptiveRule(**bad)
@@ -131,7 +158,7 @@ def test_rerank_ranks_the_union_of_both_searches_by_the_adaptive_distance():
     def vectors_of(wanted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return wanted, db[wanted - 10]
 
-    rule = AdaptiveRule(weight=0.4, neighbours=2, expansion=1)
+    rule = AdaptiveRule(weight=0.4, neighbours=2, expansion=1, distinct=0.0)
     query = np.array([0.5, 0.25], np.float32)
     got, dist = adaptive_rerank(query, search, vectors_of, 1, stored, rule, candidates=2)
     assert len(searched) == 2
@@ -148,3 +175,34 @@ def test_rerank_of_an_empty_answer_is_empty():
     got, dist = adaptive_rerank(np.zeros(2, np.float32), lambda v, n: np.zeros(0, np.int64),
                                 lambda i: (i, np.zeros((0, 2), np.float32)), 1, 1.0, AdaptiveRule(), 5)
     assert got.shape == dist.shape == (0,)
+
+
+def test_distinct_first_is_lowes_ratio_test():
+    assert distinct_first(np.array([5.0, 1.0, 2.0]), 0.9) == 1  # 1 < 0.9 × 2
+    assert distinct_first(np.array([5.0, 1.9, 2.0]), 0.9) is None  # 1.9 >= 1.8
+    assert distinct_first(np.array([0.0, 0.0, 3.0]), 0.9) is None  # two copies: neither is distinct
+    assert distinct_first(np.array([0.0, 3.0]), 0.9) == 0  # one stored copy at 0
+    assert distinct_first(np.array([1.0]), 0.9) is None  # one candidate: no second to compare
+    assert distinct_first(np.array([1.0, 5.0]), 0.0) is None  # off
+
+
+def test_a_distinct_nearest_is_not_demoted_by_the_expansion():
+    """Candidate 0 is the query's distinct nearest (fused L1 0.3 against 1.0); the expansion toward the
+    tight group 1-3 would rank the group first. With the ratio test it stays first, with its own
+    re-rank distance; without it the group leads."""
+    db = np.array([[0.0, 0.3], [1.0, 0.0], [1.05, 0.05], [1.1, 0.0], [9.0, 9.0]], np.float32)
+    ids = np.arange(5)
+
+    def search(v: np.ndarray, n: int) -> np.ndarray:
+        return ids[np.argsort(np.abs(db - v).sum(1), kind="stable")[:n]]
+
+    query = np.array([0.0, 0.0], np.float32)  # L1: 0.3, 1.0, 1.1, 1.1, 18
+    base = dict(weight=1.0, neighbours=2, expansion=3)
+    def rerank(distinct: float) -> tuple[np.ndarray, np.ndarray]:
+        rule = AdaptiveRule(**base, distinct=distinct)
+        return adaptive_rerank(query, search, lambda j: (j, db[j]), 1, 1.0, rule, 5)
+
+    (off, d_off), (on, d_on) = rerank(0.0), rerank(0.9)
+    assert off[0] != 0 and on[0] == 0
+    np.testing.assert_array_equal(on[1:], [j for j in off if j != 0])
+    assert d_on[0] == pytest.approx(d_off[list(off).index(0)])  # its own distance, not the next's

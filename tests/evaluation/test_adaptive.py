@@ -34,10 +34,26 @@ def test_each_row_is_the_rerank_then_the_rest_in_the_fixed_order_and_the_left_ou
 
 
 def test_with_every_shape_a_candidate_the_order_is_the_adaptive_distance():
-    rule = fusion.AdaptiveRule(neighbours=3, expansion=1)
+    rule = fusion.AdaptiveRule(neighbours=3, expansion=1, distinct=0.0)  # no distinct nearest kept first
     q = np.array([[2.9, 0.1]], np.float32)  # BoF next to class 2, Shape-DNA inside class 1
     r = adaptive.ranks(q, DB, np.array([-1]), 1, 1.0, rule, candidates=6)
     w, expanded = fusion.adaptive_query(q[0], DB, 1, 1.0, rule)
     want = np.argsort(fusion.adaptive_distances(expanded, w, DB, 1, 1.0), kind="stable")
     np.testing.assert_array_equal(np.argsort(r[0]), want)
     assert set(want[:3]) == {0, 1, 2}  # the Shape-DNA's class first
+
+
+def test_a_distinct_nearest_stays_first():
+    """The same query with the ratio test on: its index nearest (shape 3, fused L1 2.0 against 2.6 for
+    the second, 0.77 < 0.9) comes first, the rest in the re-rank's order."""
+    q = np.array([[2.9, 0.1]], np.float32)
+    off = adaptive.ranks(q, DB, np.array([-1]), 1, 1.0, fusion.AdaptiveRule(neighbours=3, expansion=1,
+                                                                             distinct=0.0), candidates=6)
+    on = adaptive.ranks(q, DB, np.array([-1]), 1, 1.0, fusion.AdaptiveRule(neighbours=3, expansion=1,
+                                                                            distinct=0.9), candidates=6)
+    rest = [j for j in np.argsort(off[0]) if j != 3]
+    np.testing.assert_array_equal(np.argsort(on[0]), [3, *rest])
+    # under the ratio (2.0 / 2.6 = 0.77 > 0.75) nothing is kept first
+    strict = adaptive.ranks(q, DB, np.array([-1]), 1, 1.0, fusion.AdaptiveRule(neighbours=3, expansion=1,
+                                                                                distinct=0.75), candidates=6)
+    np.testing.assert_array_equal(strict, off)

@@ -13,6 +13,7 @@ import pytest
 from app.config import Settings
 from app.core import fusion
 from app.services import fusion_rerank, search
+from app.services import partial as partial_mod
 from app.services.context import open_context
 from app.services.errors import NotReadyError
 from app.services.live_index import LiveIndex
@@ -74,7 +75,8 @@ def ctx(settings, monkeypatch, deleted):
 
     monkeypatch.setattr(fusion_rerank.vocab_repo, "vectors_of", vectors_of)
     # six models: the agreement of each part's 3 nearest (the default 10 would take every model)
-    monkeypatch.setattr(fusion_rerank, "RULE", fusion.AdaptiveRule(neighbours=3, expansion=1))
+    # (the ratio test off: the toy query's BoF-nearest model 4 is distinct, and the test is the class switch)
+    monkeypatch.setattr(fusion_rerank, "RULE", fusion.AdaptiveRule(neighbours=3, expansion=1, distinct=0.0))
     monkeypatch.setattr(search.vocab_repo, "vector_of",
                         lambda conn, mid, vid: np.array(STORED[mid], np.float32))
     return ctx
@@ -168,11 +170,37 @@ def test_the_faiss_index_and_the_database_serve_what_the_core_ranks(data_dir):
         return j, db[np.searchsorted(db_ids, j)]
 
     assert np.all(np.diff(db_ids) > 0)
+    local = partial_mod.local_of(ctx, mid)  # the stored model's rim decides its floor (closed or open)
+    assert local is not None
     want, dist = fusion.adaptive_rerank(vectors[0], nearest, vectors_of, pair.vocabulary.size,
                                         pair.vocabulary.fusion.weight, fusion_rerank.RULE,
-                                        fusion_rerank.CANDIDATES)
+                                        fusion_rerank.CANDIDATES, local.rim)
     result = search.similar(ctx, live, mid, k=5)
     assert [h.model.id for h in result.hits] == want[:5].tolist()
     np.testing.assert_allclose([h.rerank for h in result.hits], dist[:5], rtol=1e-5)
     index_l1 = np.abs(db[np.searchsorted(db_ids, want[:5])].astype(np.float64) - vectors[0]).sum(axis=1)
     np.testing.assert_allclose([h.distance for h in result.hits], index_l1, rtol=1e-5)
+
+
+@pytest.mark.parametrize("rim", [0.0, 0.1])
+def test_the_querys_rim_reaches_the_rule(ctx, monkeypatch, rim):
+    """A whole query (rim under the piece threshold) is re-ranked with its own rim: closed (0) or open."""
+    seen: list[float | None] = []
+    real = fusion.adaptive_rerank
+
+    def spy(*args, **kwargs):
+        seen.append(args[7] if len(args) > 7 else kwargs.get("rim"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(fusion_rerank.fusion, "adaptive_rerank", spy)
+    monkeypatch.setattr(search.partial_mod, "score", lambda ctx, local, ids: [None] * len(ids))
+    query = SimpleNamespace(local=SimpleNamespace(rim=rim))
+    result = search.search_description(ctx, BruteLive(), query, k=6)  # type: ignore[arg-type]
+    assert seen == [rim]
+    assert not result.hits[0].partial
+    ids = np.array(sorted(STORED))
+    db = np.array([STORED[i] for i in ids], np.float32)
+    want, _ = real(QUERY, lambda v, n: ids[np.argsort(np.abs(db - v).sum(1), kind="stable")[:n]],
+                   lambda j: (j, db[np.searchsorted(ids, j)]), 1, 1.0, fusion_rerank.RULE,
+                   fusion_rerank.CANDIDATES, rim)
+    assert [h.model.id for h in result.hits] == want.tolist()
