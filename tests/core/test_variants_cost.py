@@ -36,14 +36,19 @@ class Count:
 
 
 def test_a_pair_far_from_any_relation_is_decided_on_the_subsample(monkeypatch) -> None:
-    """Must not match: a torus against a box (near enough in fingerprint for the gate to let them
-    through, decided quickly), two different random hulls."""
-    fits = Count(monkeypatch, "icp_batch")
-    evidence = Count(monkeypatch, "_evidence")
+    """Must not match: a torus against a box (within the gate's fingerprint radius, decided quickly
+    when the gate's per-entry boxes are opened; with them, no fit at all), two different random
+    hulls."""
     box = trimesh.creation.box(extents=[1, 2, 3]).subdivide().subdivide()
     torus = trimesh.creation.torus(1.0, 0.3, major_sections=48, minor_sections=24)
     a, b = (Prepared(Mesh(np.asarray(t.vertices), np.asarray(t.faces, np.int64))) for t in (torus, box))
-    assert may_relate(a, b)  # the premise: past the invariant gate (gate.py), a fit is made
+    assert not may_relate(a, b) and relate(a, b).screened  # the entries' boxes rule it out
+    gate = importlib.import_module("app.core.variants.gate")
+    monkeypatch.setattr(gate, "SAME_BOX", np.full(17, np.inf))
+    monkeypatch.setattr(gate, "COARSE_BOX", np.full(17, np.inf))
+    fits = Count(monkeypatch, "icp_batch")
+    evidence = Count(monkeypatch, "_evidence")
+    assert may_relate(a, b)  # the premise: past the radius test (gate.py), a fit is made
     ev = relate(a, b)
     assert ev.relation == "similar"
     assert ev.confidence >= 1.0 - 0.5 / R.QUICK_MARGIN  # its margin on the subsample
