@@ -146,3 +146,12 @@ def test_shortlist_verifies_every_near_copy_and_a_few_others() -> None:
     got = shortlist(index, base[None])
     assert set(got[:9]) == set(range(9)) and len(got) == 9  # all the copies, past the cap of VERIFY
     assert len(shortlist(index, far[:1], exclude=9)) == VERIFY
+
+
+def test_index_rows_of_a_key() -> None:
+    index = FingerprintIndex()
+    vectors = np.arange(4 * 17, dtype=np.float32).reshape(4, 17)
+    index.build(np.array([1, 1, 2]), vectors[:3])
+    index.add(np.array([1]), vectors[3:])
+    np.testing.assert_array_equal(index.rows(1), vectors[[0, 1, 3]])
+    assert index.rows(5).shape == (0, 17)

@@ -125,3 +125,30 @@ def test_a_pair_decided_by_its_objects_is_not_called_screened() -> None:
     assert not may_relate(small, big) and any(may_relate(small, o) for o in big.parts)  # the premises
     for ev in (relate(small, big), relate(big, small)):
         assert ev.relation == "similar" and not ev.screened and np.isfinite(ev.chamfer)
+
+
+def test_fingerprint_rows_screen_implies_the_gate_answer() -> None:
+    """may_relate_any on the stored fingerprints (whole + objects) says False only where relate() can
+    answer nothing but the gate's `similar`: a torus and a box (within the radius, outside the box);
+    a hull and a plate holding it pass (through an object), as do a hull and its coarse copy."""
+    from app.core.variants.collection import fingerprints
+    from app.core.variants.gate import may_relate_any
+    from tests.variant_meshes import hull, plate
+
+    box = _prepared(trimesh.creation.box(extents=[1, 2, 3]).subdivide().subdivide())
+    torus = _prepared(trimesh.creation.torus(1.0, 0.3, major_sections=48, minor_sections=24))
+    assert np.linalg.norm(torus.fingerprint - box.fingerprint) <= RADIUS  # the premise: a lookup finds it
+    assert not may_relate_any(fingerprints(torus), fingerprints(box))
+    assert relate(torus, box).screened and relate(box, torus).screened
+    part = Prepared(hull(7))
+    on_plate = Prepared(plate([hull(20), hull(7), hull(21)]))
+    assert may_relate_any(fingerprints(part), fingerprints(on_plate))
+    assert relate(part, on_plate).relation == "part_of"
+    fine = _prepared(trimesh.creation.icosphere(subdivisions=4))
+    coarse = _prepared(trimesh.creation.icosphere(subdivisions=1))
+    assert may_relate_any(fingerprints(coarse), fingerprints(fine))
+    others = [_prepared(hull_trimesh(s)) for s in range(30, 36)] + [box, torus, fine, coarse, part, on_plate]
+    for a in others:  # whenever the screen says no, relate says the gate's unmeasured `similar`
+        for b in others:
+            if a is not b and not may_relate_any(fingerprints(a), fingerprints(b)):
+                assert relate(a, b).screened

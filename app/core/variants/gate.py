@@ -60,3 +60,13 @@ def may_relate(a: Prepared, b: Prepared) -> bool:
     # finer one: it needs that mesh much coarser, and never passes one of fewer than MIN_VERTICES
     coarser = a if a.resolution >= b.resolution else b
     return much_coarser and coarser.mesh.n_vertices >= MIN_VERTICES
+
+
+def may_relate_any(queries: np.ndarray, rows: np.ndarray) -> bool:
+    """Whether any fingerprint of one model (queries (q, 17): its whole and objects) and any of another
+    (rows (r, 17)) are within RADIUS and COARSE_BOX of each other. When none are, may_relate rules out
+    the whole surfaces and every object pair whatever the resolutions (COARSE_BOX is the wider box),
+    so relate() can only answer the gate's `similar`: the service then skips reading the stored mesh."""
+    diff = np.abs(np.asarray(queries, np.float32)[:, None] - np.asarray(rows, np.float32)[None])  # (q, r, 17)
+    near = np.linalg.norm(diff, axis=2) <= RADIUS
+    return bool((near & np.all(diff <= COARSE_BOX, axis=2)).any())

@@ -48,6 +48,10 @@ class FingerprintIndex:
         self._vectors = np.concatenate([self._vectors, vectors])
         self._index.add(vectors)
 
+    def rows(self, key: int) -> np.ndarray:
+        """(r, DIM) float32: the fingerprints stored under `key` (a model's whole and its objects)."""
+        return self._vectors[self._keys == key]
+
     def search(self, queries: np.ndarray, k: int = 16) -> tuple[np.ndarray, np.ndarray]:
         """queries (q, DIM) -> (keys (q, k) int64, L2 distances (q, k)); key -1 where fewer exist."""
         queries = np.ascontiguousarray(queries, dtype=np.float32).reshape(-1, DIM)
