@@ -125,3 +125,22 @@ def test_vertex_subset_of_the_prepared_used_vertices_is_the_same() -> None:
     for limit in (None, 50, 7):
         assert np.array_equal(vertex_subset(extra, limit, p.used_vertices), vertex_subset(extra, limit))
     assert [9.0, 9.0, 9.0] not in p.used_vertices.tolist()
+
+
+def test_a_pair_of_many_vertices_twice_past_on_the_subsample_is_decided_there(monkeypatch) -> None:
+    """Must not match: two random hulls of 1,000 points (38 and 33 vertices) are 2-4 times past the
+    tolerances on the quick subsample: both have FIRM_VERTICES or more, so that decides. Two hulls
+    of 400 points (20 and 30 vertices) as far past go on to the fine fit (a coarse mesh's quick fit
+    may be off its best); both `similar`."""
+    evidence = Count(monkeypatch, "_evidence")
+    firm = (Prepared(_hull(1, n=1000)), Prepared(_hull(2, n=1000)))
+    loose = (Prepared(_hull(1, n=400)), Prepared(_hull(2, n=400)))
+    assert min(p.mesh.n_vertices for p in firm) >= R.FIRM_VERTICES  # the premises
+    assert min(p.mesh.n_vertices for p in loose) < R.FIRM_VERTICES
+    ev = relate(*firm)
+    assert ev.relation == "similar"
+    assert 1.0 - 0.5 / R.QUICK_MARGIN_FIRM <= ev.confidence < 1.0 - 0.5 / R.QUICK_MARGIN  # 2-4 times past
+    assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS]
+    evidence.calls.clear()
+    assert relate(*loose).relation == "similar"
+    assert evidence.calls[0].get("points") == R.QUICK_POINTS and len(evidence.calls) > 1  # the fine fit
