@@ -153,5 +153,11 @@ def test_index_rows_of_a_key() -> None:
     vectors = np.arange(4 * 17, dtype=np.float32).reshape(4, 17)
     index.build(np.array([1, 1, 2]), vectors[:3])
     index.add(np.array([1]), vectors[3:])
-    np.testing.assert_array_equal(index.rows(1), vectors[[0, 1, 3]])
+    np.testing.assert_array_equal(index.rows(1), vectors[[0, 1, 3]])  # out of order: by a scan
     assert index.rows(5).shape == (0, 17)
+    ordered = FingerprintIndex()
+    ordered.build(np.array([1, 1, 2]), vectors[:3])
+    ordered.add(np.array([4, 4]), vectors[2:])
+    np.testing.assert_array_equal(ordered.rows(1), vectors[:2])  # in order: by bisection
+    np.testing.assert_array_equal(ordered.rows(4), vectors[2:])
+    assert ordered.rows(3).shape == (0, 17) and ordered.rows(0).shape == (0, 17)
