@@ -15,6 +15,7 @@ import numpy as np
 from app.core.mesh import InvalidMeshError, Mesh, load_mesh
 from app.core.variants import DIM, FINGERPRINT_VERSION, Evidence, Prepared, relate
 from app.core.variants.collection import fingerprints, shortlist
+from app.core.variants.gate import may_relate_any
 from app.core.variants.index import FingerprintIndex
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError, NotFoundError
@@ -45,6 +46,11 @@ class FingerprintCache:
                 self._index.add(ids, vectors)
             self._seq = seq
             return shortlist(self._index, queries, exclude)
+
+    def rows(self, model_id: int) -> np.ndarray:
+        """(r, DIM) the fingerprints stored for a model (its whole and objects)."""
+        with self._lock:
+            return self._index.rows(model_id)
 
 
 class PreparedCache:
@@ -128,6 +134,8 @@ def detect(ctx: ServiceContext, model_id: int, mesh: Mesh) -> list[dict]:
         variants_repo.put_fingerprints(conn, model_id, FINGERPRINT_VERSION, vectors)
     found = []
     for other_id in candidates:
+        if not may_relate_any(vectors, _cache(ctx).rows(other_id)):
+            continue  # the gate rules out every pair of their fingerprints: `similar`, its file unread
         with ctx.db.read() as conn:
             other = models_repo.get(conn, other_id)
         if other is None or other.status == "failed":

@@ -36,14 +36,19 @@ class Count:
 
 
 def test_a_pair_far_from_any_relation_is_decided_on_the_subsample(monkeypatch) -> None:
-    """Must not match: a torus against a box (near enough in fingerprint for the gate to let them
-    through, decided quickly), two different random hulls."""
-    fits = Count(monkeypatch, "icp_batch")
-    evidence = Count(monkeypatch, "_evidence")
+    """Must not match: a torus against a box (within the gate's fingerprint radius, decided quickly
+    when the gate's per-entry boxes are opened; with them, no fit at all), two different random
+    hulls."""
     box = trimesh.creation.box(extents=[1, 2, 3]).subdivide().subdivide()
     torus = trimesh.creation.torus(1.0, 0.3, major_sections=48, minor_sections=24)
     a, b = (Prepared(Mesh(np.asarray(t.vertices), np.asarray(t.faces, np.int64))) for t in (torus, box))
-    assert may_relate(a, b)  # the premise: past the invariant gate (gate.py), a fit is made
+    assert not may_relate(a, b) and relate(a, b).screened  # the entries' boxes rule it out
+    gate = importlib.import_module("app.core.variants.gate")
+    monkeypatch.setattr(gate, "SAME_BOX", np.full(17, np.inf))
+    monkeypatch.setattr(gate, "COARSE_BOX", np.full(17, np.inf))
+    fits = Count(monkeypatch, "icp_batch")
+    evidence = Count(monkeypatch, "_evidence")
+    assert may_relate(a, b)  # the premise: past the radius test (gate.py), a fit is made
     ev = relate(a, b)
     assert ev.relation == "similar"
     assert ev.confidence >= 1.0 - 0.5 / R.QUICK_MARGIN  # its margin on the subsample
@@ -120,3 +125,22 @@ def test_vertex_subset_of_the_prepared_used_vertices_is_the_same() -> None:
     for limit in (None, 50, 7):
         assert np.array_equal(vertex_subset(extra, limit, p.used_vertices), vertex_subset(extra, limit))
     assert [9.0, 9.0, 9.0] not in p.used_vertices.tolist()
+
+
+def test_a_pair_of_many_vertices_twice_past_on_the_subsample_is_decided_there(monkeypatch) -> None:
+    """Must not match: two random hulls of 1,000 points (38 and 33 vertices) are 2-4 times past the
+    tolerances on the quick subsample: both have FIRM_VERTICES or more, so that decides. Two hulls
+    of 400 points (20 and 30 vertices) as far past go on to the fine fit (a coarse mesh's quick fit
+    may be off its best); both `similar`."""
+    evidence = Count(monkeypatch, "_evidence")
+    firm = (Prepared(_hull(1, n=1000)), Prepared(_hull(2, n=1000)))
+    loose = (Prepared(_hull(1, n=400)), Prepared(_hull(2, n=400)))
+    assert min(p.mesh.n_vertices for p in firm) >= R.FIRM_VERTICES  # the premises
+    assert min(p.mesh.n_vertices for p in loose) < R.FIRM_VERTICES
+    ev = relate(*firm)
+    assert ev.relation == "similar"
+    assert 1.0 - 0.5 / R.QUICK_MARGIN_FIRM <= ev.confidence < 1.0 - 0.5 / R.QUICK_MARGIN  # 2-4 times past
+    assert [c.get("points") for c in evidence.calls] == [R.QUICK_POINTS]
+    evidence.calls.clear()
+    assert relate(*loose).relation == "similar"
+    assert evidence.calls[0].get("points") == R.QUICK_POINTS and len(evidence.calls) > 1  # the fine fit

@@ -61,14 +61,29 @@ def test_fingerprint_ignores_order_motion_scale_and_mirror(random_rotation) -> N
 
 def test_third_moment_matches_dense_sampling() -> None:
     from app.core.variants.fingerprint import _third_moments
-    from app.core.variants.surface import sample_surface
+    from app.core.variants.surface import faces_of, sample_surface
 
     mesh = _hull(4)
     m = moments(mesh)
     _, axes = m.axes()
     points, _, _ = sample_surface(mesh, 400_000, seed=3)
     sampled = (((points - m.centroid) @ axes) ** 3).mean(axis=0)
-    np.testing.assert_allclose(_third_moments(mesh, m.centroid, axes), sampled, atol=0.01)
+    np.testing.assert_allclose(_third_moments(faces_of(mesh), m, axes), sampled, atol=0.01)
+
+
+def test_volume_and_shared_face_arrays_by_hand() -> None:
+    """A 1 x 2 x 3 box encloses 6 from any origin; the fingerprint from precomputed face arrays and
+    moments is the fingerprint."""
+    from app.core.variants.fingerprint import _signed_volume
+    from app.core.variants.surface import faces_of
+
+    box = trimesh.creation.box([1.0, 2.0, 3.0])
+    mesh = Mesh(np.asarray(box.vertices) + [5.0, -2.0, 1.0], np.asarray(box.faces, np.int64))
+    faces = faces_of(mesh)
+    assert abs(_signed_volume(faces, np.zeros(3))) == pytest.approx(6.0)
+    assert abs(_signed_volume(faces, np.array([40.0, 3.0, -7.0]))) == pytest.approx(6.0)
+    np.testing.assert_allclose(faces.area.sum(), 22.0)  # 2 (1*2 + 1*3 + 2*3)
+    np.testing.assert_array_equal(fingerprint(mesh, faces, moments(mesh, faces)), fingerprint(mesh))
 
 
 def test_fingerprint_separates_different_shapes() -> None:
@@ -131,3 +146,18 @@ def test_shortlist_verifies_every_near_copy_and_a_few_others() -> None:
     got = shortlist(index, base[None])
     assert set(got[:9]) == set(range(9)) and len(got) == 9  # all the copies, past the cap of VERIFY
     assert len(shortlist(index, far[:1], exclude=9)) == VERIFY
+
+
+def test_index_rows_of_a_key() -> None:
+    index = FingerprintIndex()
+    vectors = np.arange(4 * 17, dtype=np.float32).reshape(4, 17)
+    index.build(np.array([1, 1, 2]), vectors[:3])
+    index.add(np.array([1]), vectors[3:])
+    np.testing.assert_array_equal(index.rows(1), vectors[[0, 1, 3]])  # out of order: by a scan
+    assert index.rows(5).shape == (0, 17)
+    ordered = FingerprintIndex()
+    ordered.build(np.array([1, 1, 2]), vectors[:3])
+    ordered.add(np.array([4, 4]), vectors[2:])
+    np.testing.assert_array_equal(ordered.rows(1), vectors[:2])  # in order: by bisection
+    np.testing.assert_array_equal(ordered.rows(4), vectors[2:])
+    assert ordered.rows(3).shape == (0, 17) and ordered.rows(0).shape == (0, 17)

@@ -11,7 +11,15 @@ import trimesh
 
 from app.core.mesh import Mesh
 from app.core.variants import Prepared, relate
-from app.core.variants.gate import COARSE_RATIO, RADIUS, SAME_RADIUS, coarsening, may_relate
+from app.core.variants.gate import (
+    COARSE_BOX,
+    COARSE_RATIO,
+    RADIUS,
+    SAME_BOX,
+    SAME_RADIUS,
+    coarsening,
+    may_relate,
+)
 from tests.variant_meshes import hull_trimesh
 
 G = importlib.import_module("app.core.variants.gate")
@@ -33,18 +41,35 @@ def _posed(fingerprint: np.ndarray, resolution: float, vertices: int = 100) -> P
 
 def test_thresholds_by_hand() -> None:
     base = np.zeros(17)
-    step = np.eye(17)[0]
+    same = SAME_BOX / np.linalg.norm(SAME_BOX)  # unit steps spread like a true variant's gaps
+    coarse = COARSE_BOX / np.linalg.norm(COARSE_BOX)
     a = _posed(base, 0.05)
-    assert may_relate(a, _posed(base + 0.9 * SAME_RADIUS * step, 0.05))  # near: always verified
+    assert may_relate(a, _posed(base + 0.9 * SAME_RADIUS * same, 0.05))  # near: always verified
     # past SAME_RADIUS at one resolution: no relation is possible
-    assert not may_relate(a, _posed(base + 1.1 * SAME_RADIUS * step, 0.05 * 0.9 * COARSE_RATIO))
+    assert not may_relate(a, _posed(base + 1.1 * SAME_RADIUS * same, 0.05 * 0.9 * COARSE_RATIO))
     # ... unless one is much coarser (and has enough vertices to lie on the other)
-    assert may_relate(a, _posed(base + 1.1 * SAME_RADIUS * step, 0.05 * 1.1 * COARSE_RATIO))
-    assert may_relate(_posed(base, 0.05 * 1.1 * COARSE_RATIO), _posed(base + 0.99 * RADIUS * step, 0.05))
-    assert not may_relate(a, _posed(base + 1.1 * SAME_RADIUS * step, 0.05 * 3 * COARSE_RATIO, vertices=19))
-    assert not may_relate(a, _posed(base + 1.01 * RADIUS * step, 0.05 * 3 * COARSE_RATIO))  # past the radius
+    assert may_relate(a, _posed(base + 1.1 * SAME_RADIUS * coarse, 0.05 * 1.1 * COARSE_RATIO))
+    assert may_relate(_posed(base, 0.05 * 1.1 * COARSE_RATIO), _posed(base + 0.99 * RADIUS * coarse, 0.05))
+    assert not may_relate(a, _posed(base + 1.1 * SAME_RADIUS * coarse, 0.05 * 3 * COARSE_RATIO, vertices=19))
+    assert not may_relate(a, _posed(base + 1.01 * RADIUS * coarse, 0.05 * 3 * COARSE_RATIO))  # too far
     assert coarsening(a, _posed(base, 0.2)) == pytest.approx(4.0)
     assert coarsening(_posed(base, 0.2), a) == pytest.approx(4.0)  # symmetric
+
+
+def test_each_entry_within_its_box() -> None:
+    """Well within both radii, but one entry past its bound: ruled out; the same gap on an entry
+    that allows it: verified. A much coarser copy gets the wider box."""
+    base = np.zeros(17)
+    a = _posed(base, 0.05)
+    low_d2 = np.eye(17)[12]  # the D2 10 % quantile: a true variant moves it by 0.02 at most
+    area = np.eye(17)[2]  # trace / area: noise and decimation move it most
+    assert SAME_BOX[12] < 0.04 < 0.1 * SAME_RADIUS and SAME_BOX[2] > 0.4  # the premises
+    assert not may_relate(a, _posed(base + 0.04 * low_d2, 0.05))
+    assert may_relate(a, _posed(base + 0.4 * area, 0.05))
+    assert not may_relate(a, _posed(base + 0.6 * area, 0.05))  # inside SAME_RADIUS, outside its box
+    assert SAME_BOX[2] < 0.6 <= COARSE_BOX[2]
+    assert may_relate(a, _posed(base + 0.6 * area, 0.05 * 1.1 * COARSE_RATIO))
+    assert np.all(COARSE_BOX >= SAME_BOX)
 
 
 def test_resolution_is_free_of_scale_and_pose() -> None:
@@ -100,3 +125,30 @@ def test_a_pair_decided_by_its_objects_is_not_called_screened() -> None:
     assert not may_relate(small, big) and any(may_relate(small, o) for o in big.parts)  # the premises
     for ev in (relate(small, big), relate(big, small)):
         assert ev.relation == "similar" and not ev.screened and np.isfinite(ev.chamfer)
+
+
+def test_fingerprint_rows_screen_implies_the_gate_answer() -> None:
+    """may_relate_any on the stored fingerprints (whole + objects) says False only where relate() can
+    answer nothing but the gate's `similar`: a torus and a box (within the radius, outside the box);
+    a hull and a plate holding it pass (through an object), as do a hull and its coarse copy."""
+    from app.core.variants.collection import fingerprints
+    from app.core.variants.gate import may_relate_any
+    from tests.variant_meshes import hull, plate
+
+    box = _prepared(trimesh.creation.box(extents=[1, 2, 3]).subdivide().subdivide())
+    torus = _prepared(trimesh.creation.torus(1.0, 0.3, major_sections=48, minor_sections=24))
+    assert np.linalg.norm(torus.fingerprint - box.fingerprint) <= RADIUS  # the premise: a lookup finds it
+    assert not may_relate_any(fingerprints(torus), fingerprints(box))
+    assert relate(torus, box).screened and relate(box, torus).screened
+    part = Prepared(hull(7))
+    on_plate = Prepared(plate([hull(20), hull(7), hull(21)]))
+    assert may_relate_any(fingerprints(part), fingerprints(on_plate))
+    assert relate(part, on_plate).relation == "part_of"
+    fine = _prepared(trimesh.creation.icosphere(subdivisions=4))
+    coarse = _prepared(trimesh.creation.icosphere(subdivisions=1))
+    assert may_relate_any(fingerprints(coarse), fingerprints(fine))
+    others = [_prepared(hull_trimesh(s)) for s in range(30, 36)] + [box, torus, fine, coarse, part, on_plate]
+    for a in others:  # whenever the screen says no, relate says the gate's unmeasured `similar`
+        for b in others:
+            if a is not b and not may_relate_any(fingerprints(a), fingerprints(b)):
+                assert relate(a, b).screened

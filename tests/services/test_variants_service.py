@@ -64,3 +64,30 @@ def test_detect_links_both_ways_and_decisions_are_kept(db_url, tmp_path):  # noq
         assert variants_repo.decisions_of(conn, a)[b]["decision"] == "keep_both"
         ids, vectors, _ = variants_repo.fingerprints_since(conn, 0, 1, vectors_dim := 17)
     assert set(ids.tolist()) == {a, c} and vectors.shape[1] == vectors_dim
+
+
+def test_a_candidate_every_fingerprint_pair_rules_out_is_not_read(tmp_path, monkeypatch):
+    """A box found by the lookup for a torus (fingerprints within the radius) but ruled out by the
+    gate's per-entry box for every pair of their fingerprints: no link, and its file is not read."""
+    import trimesh
+
+    from app.core.variants import Prepared
+    from app.core.variants.gate import RADIUS
+
+    ctx = open_context(make_settings(tmp_path / "d"))
+    box = trimesh.creation.box(extents=[1, 2, 3]).subdivide().subdivide()
+    torus = trimesh.creation.torus(1.0, 0.3, major_sections=48, minor_sections=24)
+    meshes = [Mesh(np.asarray(t.vertices), np.asarray(t.faces, np.int64)) for t in (box, torus)]
+    assert np.linalg.norm(Prepared(meshes[0]).fingerprint - Prepared(meshes[1]).fingerprint) <= RADIUS
+    ids = [ingestion.submit(ctx, t.export(file_type="stl"), f"{n}.stl").model.id
+           for n, t in (("box", box), ("torus", torus))]
+    read: list[str] = []
+    real = variants.stored_prepared
+    monkeypatch.setattr(variants, "stored_prepared", lambda c, sha, ft: read.append(sha) or real(c, sha, ft))
+    assert variants.detect(ctx, ids[0], meshes[0]) == []
+    assert variants._cache(ctx).candidates(ctx, np.array([Prepared(meshes[1]).fingerprint]), None) == [ids[0]]
+    assert variants.detect(ctx, ids[1], meshes[1]) == []
+    assert read == []  # the box was a candidate, never read
+    copy = ingestion.submit(ctx, box.export(file_type="obj").encode(), "box.obj").model.id
+    assert [f["relation"] for f in variants.detect(ctx, copy, meshes[0])] == ["identical"]
+    assert len(read) == 1  # a candidate the screen lets through is read and verified

@@ -13,7 +13,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from app.core.meshdata import Mesh
-from app.core.variants.surface import moments
+from app.core.variants.surface import Moments, moments
 
 ICP_ITERATIONS = 20
 DEGENERATE_GAP = 0.05  # relative eigenvalue gap below which two principal axes are interchangeable
@@ -35,8 +35,9 @@ class Frame:
         return (x - self.centroid) @ self.axes / self.radius
 
 
-def frame(mesh: Mesh) -> Frame:
-    m = moments(mesh)
+def frame(mesh: Mesh, m: Moments | None = None) -> Frame:
+    """The mesh's frame (`m`: its moments when already at hand)."""
+    m = m or moments(mesh)
     values, axes = m.axes()
     return Frame(m.centroid, float(np.sqrt(max(values.sum(), 1e-300))), axes, values)
 

@@ -18,6 +18,7 @@ class FingerprintIndex:
         self._exact_below, self._m, self._ef = exact_below, neighbours, ef_search
         self._vectors = np.zeros((0, DIM), np.float32)
         self._keys = np.zeros(0, np.int64)
+        self._ordered = True  # keys non-decreasing (models stored in id order): rows() by bisection
         self._index: faiss.Index | None = None
 
     def __len__(self) -> int:
@@ -26,6 +27,7 @@ class FingerprintIndex:
     def build(self, keys: np.ndarray, vectors: np.ndarray) -> None:
         """keys (n,) int64 (several rows may share a key), vectors (n, DIM) float32."""
         self._keys = np.asarray(keys, np.int64)
+        self._ordered = bool(np.all(np.diff(self._keys) >= 0))
         self._vectors = np.ascontiguousarray(vectors, dtype=np.float32).reshape(-1, DIM)
         if len(self._keys) < self._exact_below:
             self._index = faiss.IndexFlatL2(DIM)
@@ -44,9 +46,19 @@ class FingerprintIndex:
         if self._index is None or (flat and len(self._keys) + len(keys) >= self._exact_below):
             self.build(np.concatenate([self._keys, keys]), np.concatenate([self._vectors, vectors]))
             return
+        self._ordered = self._ordered and bool(np.all(np.diff(keys) >= 0)) and (
+            not len(self._keys) or not len(keys) or keys[0] >= self._keys[-1])
         self._keys = np.concatenate([self._keys, keys])
         self._vectors = np.concatenate([self._vectors, vectors])
         self._index.add(vectors)
+
+    def rows(self, key: int) -> np.ndarray:
+        """(r, DIM) float32: the fingerprints stored under `key` (a model's whole and its objects); by
+        bisection while the keys came in order, else by a scan."""
+        if self._ordered:
+            lo, hi = np.searchsorted(self._keys, key, "left"), np.searchsorted(self._keys, key, "right")
+            return self._vectors[lo:hi]
+        return self._vectors[self._keys == key]
 
     def search(self, queries: np.ndarray, k: int = 16) -> tuple[np.ndarray, np.ndarray]:
         """queries (q, DIM) -> (keys (q, k) int64, L2 distances (q, k)); key -1 where fewer exist."""

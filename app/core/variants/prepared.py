@@ -14,7 +14,14 @@ from app.core.meshdata import Mesh
 from app.core.variants.align import Frame, frame
 from app.core.variants.fingerprint import fingerprint
 from app.core.variants.onesided import mean_edge
-from app.core.variants.surface import closest_on_triangles, objects, sample_surface
+from app.core.variants.surface import (
+    Moments,
+    closest_on_triangles,
+    faces_of,
+    moments,
+    objects,
+    sample_surface,
+)
 
 N_POINTS = 2048  # samples per surface for alignment and distances
 
@@ -24,13 +31,21 @@ class Prepared:
     mesh: Mesh
 
     @cached_property
+    def _summary(self) -> tuple[Moments, np.ndarray, float]:
+        """Moments, fingerprint and mean edge from one pass over the faces (their per-face arrays are
+        not kept: a cached candidate keeps only what it is compared with)."""
+        faces = faces_of(self.mesh)
+        m = moments(self.mesh, faces)
+        return m, fingerprint(self.mesh, faces, m), mean_edge(self.mesh, faces.tri)
+
+    @cached_property
     def fingerprint(self) -> np.ndarray:
         """(17,) float32, see fingerprint.fingerprint."""
-        return fingerprint(self.mesh)
+        return self._summary[1]
 
     @cached_property
     def frame(self) -> Frame:
-        return frame(self.mesh)
+        return frame(self.mesh, self._summary[0])
 
     @cached_property
     def diagonal(self) -> float:
@@ -39,7 +54,7 @@ class Prepared:
 
     @cached_property
     def mean_edge(self) -> float:
-        return mean_edge(self.mesh)
+        return self._summary[2]
 
     @cached_property
     def resolution(self) -> float:

@@ -40,27 +40,47 @@ class Moments:
         return values, vectors
 
 
-def moments(mesh: Mesh) -> Moments:
+@dataclass(frozen=True)
+class Faces:
+    """Per-face arrays every surface integral and sample needs, computed once per mesh.
+
+    tri   : (f, 3, 3) corner coordinates
+    cross : (f, 3) (b - a) x (c - a), twice the area times the unit normal
+    area  : (f,) triangle areas
+    """
+
+    tri: np.ndarray
+    cross: np.ndarray
+    area: np.ndarray
+
+
+def faces_of(mesh: Mesh) -> Faces:
+    tri = mesh.vertices[mesh.faces]  # (f, 3, 3)
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # (f, 3)
+    return Faces(tri, cross, 0.5 * np.sqrt(np.einsum("fi,fi->f", cross, cross)))
+
+
+def moments(mesh: Mesh, faces: Faces | None = None) -> Moments:
     """Exact area moments of the triangles (the integral of x x^T over a triangle with corners a, b, c
     is A/12 (a a^T + b b^T + c c^T + s s^T) with s = a + b + c)."""
-    tri = mesh.vertices[mesh.faces]  # (f, 3, 3)
-    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)  # (f,)
+    f = faces or faces_of(mesh)
+    tri, areas = f.tri, f.area
     total = float(areas.sum())
-    centroid = (areas[:, None] * tri.mean(axis=1)).sum(axis=0) / total  # (3,)
+    centroid = areas @ (tri[:, 0] + tri[:, 1] + tri[:, 2]) / (3.0 * total)  # (3,)
     local = tri - centroid  # centring first keeps the sum exact for far-away meshes
-    s = local.sum(axis=1)  # (f, 3)
-    second = np.einsum("fij,fik->jk", local * areas[:, None, None], local) + np.einsum(
-        "fj,fk->jk", s * areas[:, None], s
-    )
+    s = local[:, 0] + local[:, 1] + local[:, 2]  # (f, 3)
+    corners = local.reshape(-1, 3)  # (3 f, 3)
+    second = (corners * np.repeat(areas, 3)[:, None]).T @ corners + (s * areas[:, None]).T @ s
     return Moments(total, centroid, second / (12.0 * total))
 
 
-def sample_surface(mesh: Mesh, n: int, seed: int = SAMPLE_SEED) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def sample_surface(
+    mesh: Mesh, n: int, seed: int = SAMPLE_SEED, faces: Faces | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """n points uniformly by area on the surface, their unit face normals and faces: points (n, 3),
     normals (n, 3), face (n,) int."""
-    tri = mesh.vertices[mesh.faces]
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # (f, 3)
-    areas = np.linalg.norm(cross, axis=1)
+    f = faces or faces_of(mesh)
+    tri, cross, areas = f.tri, f.cross, 2.0 * f.area
     rng = np.random.default_rng(seed)
     face = np.minimum(np.searchsorted(np.cumsum(areas), rng.random(n) * areas.sum()), len(areas) - 1)
     u, v = rng.random(n), rng.random(n)
