@@ -18,7 +18,13 @@ import numpy as np
 
 from app.core.explain import ShapeWords, contributions, shape_words, top_words
 from app.core.mesh import Mesh, load_mesh
-from app.core.pipeline import DescribeParams, ShapeDescription, canonical_mesh, describe_canonical
+from app.core.pipeline import (
+    DescribeParams,
+    ShapeDescription,
+    canonical_mesh,
+    canonical_with_rim,
+    describe_canonical,
+)
 from app.core.vocabulary import EncodeParams, Vocabulary
 from app.services.context import ServiceContext
 from app.services.errors import ConflictError, InvalidInputError, NotFoundError
@@ -87,8 +93,8 @@ def query_geometry(
 ) -> tuple[ShapeDescription, Geometry]:
     """An uploaded query: its description and its canonical geometry (one load, as /search loads it)."""
     mesh = load_upload(data, file_type, max_vertices)
-    fine = canonical_mesh(mesh, params)
-    return describe_canonical(fine, mesh.n_vertices, params), from_canonical(fine)
+    fine, rim = canonical_with_rim(mesh, params)
+    return describe_canonical(fine, mesh.n_vertices, params, rim), from_canonical(fine)
 
 
 # ---- in the API process (threads) -------------------------------------------------------------------------

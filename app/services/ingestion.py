@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from app.core.mesh import Mesh, detect_format, load_mesh
-from app.core.pipeline import DescribeParams, ShapeDescription, canonical_mesh, describe_canonical
+from app.core.pipeline import DescribeParams, ShapeDescription, canonical_with_rim, describe_canonical
 from app.services import variants, views
 from app.services.clients import current_client
 from app.services.context import ServiceContext
@@ -90,11 +90,13 @@ def submit(
 
 
 def describe_and_view(mesh: Mesh, params: DescribeParams) -> tuple[ShapeDescription, Mesh]:
-    """describe(mesh, params) and the canonical mesh it was made on (the explain view's), resampled once."""
+    """describe(mesh, params) and the canonical mesh it was made on (the explain view's), resampled once.
+    The rim (free boundary, and the caps that closed small holes) is describe()'s, so a stored model's
+    local signature and rim are those of the same mesh described as a query."""
     t = time.perf_counter()
-    fine = canonical_mesh(mesh, params)
+    fine, rim = canonical_with_rim(mesh, params)
     canonical_s = time.perf_counter() - t
-    description = describe_canonical(fine, mesh.n_vertices, params)
+    description = describe_canonical(fine, mesh.n_vertices, params, rim)
     description.seconds["resample"] = description.seconds.get("resample", 0.0) + canonical_s
     return description, fine
 

@@ -392,3 +392,28 @@ def test_a_vocabulary_that_keeps_changing_gives_up_after_five_tries(ctx, fakes):
         ingestion.run_ingest(ctx, job)
     assert len(fakes.encode) == 5
     assert _model(ctx, model_id).status == "queued" and _job(ctx, job.id).state == "queued"
+
+
+def test_a_stored_description_has_the_rim_of_the_same_mesh_described_as_a_query():
+    """describe_and_view (ingest) resamples once for the explain view; its description must still be
+    describe()'s, rim included: a small hole closed by a cap is a boundary for the local signature and
+    the fusion re-rank (an open model). A sphere with a small hole at its pole: capped, rim > 0."""
+    import trimesh
+
+    from app.core.meshdata import Mesh
+    from app.core.pipeline import DescribeParams, canonical_mesh, describe, describe_canonical
+
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    keep = np.flatnonzero(np.linalg.norm(sphere.triangles_center - [0, 0, 1], axis=1) > 0.1)
+    mesh = Mesh(np.asarray(sphere.vertices, np.float64), np.asarray(sphere.faces[keep], np.int64))
+    params = DescribeParams(k=40, m=20, target_vertices=600)
+    want = describe(mesh, params)
+    got, fine = ingestion.describe_and_view(mesh, params)
+    assert want.local is not None and got.local is not None
+    assert want.local.rim > 0  # the cap's rim counts
+    assert got.local.rim == pytest.approx(want.local.rim)
+    np.testing.assert_array_equal(got.local.valid, want.local.valid)
+    np.testing.assert_allclose(got.local.slopes, want.local.slopes, rtol=1e-5, atol=1e-6)
+    assert fine.n_vertices == canonical_mesh(mesh, params).n_vertices
+    # what the ingest stored before: the capped mesh described as if it were closed
+    assert describe_canonical(fine, mesh.n_vertices, params).local.rim == 0.0
