@@ -159,3 +159,25 @@ def test_cover_margin_by_hand_and_as_a_lower_bound_of_the_side_margin() -> None:
     assert side(vertices, other, 0.05, 0.05)[4] == pytest.approx(cover_margin(other, 0.05, 0.05))
     far = np.full(50, 0.2)  # vertices off the surface raise the margin above the bound
     assert side(far, other, 0.05, 0.05)[4] > cover_margin(other, 0.05, 0.05)
+
+
+@pytest.mark.parametrize("subdivisions", [0, 1, 3])
+def test_distance_to_surface_is_the_exact_point_to_triangle_distance(subdivisions: int) -> None:
+    """Against every face by brute force: a coarse mesh (many repeated candidate faces per point) and
+    a fine one, points on, inside and outside the surface."""
+    from app.core.variants.surface import closest_on_triangles
+
+    tm = trimesh.creation.icosphere(subdivisions=subdivisions)
+    mesh = Mesh(np.asarray(tm.vertices), np.asarray(tm.faces, np.int64))
+    rng = np.random.default_rng(subdivisions)
+    directions = rng.standard_normal((300, 3))
+    points = directions / np.linalg.norm(directions, axis=1)[:, None] * rng.uniform(0.8, 1.2, (300, 1))
+    got = Prepared(mesh).distance_to(points)
+    v, f = mesh.vertices, mesh.faces
+    p = np.repeat(points, len(f), axis=0)
+    tiled = np.tile(f, (len(points), 1))
+    near = closest_on_triangles(p, v[tiled[:, 0]], v[tiled[:, 1]], v[tiled[:, 2]])
+    expected = np.linalg.norm(near - p, axis=1).reshape(len(points), len(f)).min(axis=1)
+    assert got.shape == (300,)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+    assert got.max() > 0.1  # the points are off the surface, not only on it
