@@ -181,3 +181,37 @@ def test_distance_to_surface_is_the_exact_point_to_triangle_distance(subdivision
     assert got.shape == (300,)
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
     assert got.max() > 0.1  # the points are off the surface, not only on it
+
+
+def test_a_direction_skipped_on_its_coverage_leaves_the_decision_as_the_full_test_gives_it() -> None:
+    """_evidence(decide=d) measures a one-sided direction only when its coverage alone is under d:
+    on spheres, ellipsoids and a capsule at several resolutions, in place, every relation and every
+    `similar` decision at d are those of the full test; a retriangulated pair's evidence is the same."""
+    from app.core.variants.align import Similarity
+
+    r = importlib.import_module("app.core.variants.relate")
+
+    def prepared(tm: trimesh.Trimesh) -> Prepared:
+        return Prepared(Mesh(np.asarray(tm.vertices, float), np.asarray(tm.faces, np.int64)))
+
+    shapes = [prepared(trimesh.creation.icosphere(1)), prepared(trimesh.creation.icosphere(3)),
+              prepared(trimesh.creation.icosphere(3).apply_scale(1.08)),
+              prepared(trimesh.creation.icosphere(3).apply_scale([1.0, 1.0, 0.8])),
+              prepared(trimesh.creation.icosphere(1).apply_scale([1.15, 1.0, 0.85])),
+              prepared(trimesh.creation.capsule(1.0, 0.8))]
+    in_place = Similarity(1.0, np.eye(3), np.zeros(3))
+    skipped = 0
+    for a in shapes:
+        for b in shapes:
+            if a is b:
+                continue
+            full = r._evidence(a, b, in_place, points=256)
+            for decide in (2.0, 4.0):
+                fast = r._evidence(a, b, in_place, points=256, decide=decide)
+                assert fast.relation == full.relation
+                at = 1.0 - 0.5 / decide
+                assert (fast.confidence >= at) == (full.confidence >= at)
+                if full.relation == "retriangulated":
+                    assert fast == full
+                skipped += fast.confidence != full.confidence
+    assert skipped >= 4  # directions were skipped, and the bound said instead is a lower margin
