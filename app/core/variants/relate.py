@@ -271,10 +271,11 @@ def _evidence(
 ) -> Evidence:
     """The surface distances under `sim` (a's and b's samples, or the first `points` of them: the
     samples are drawn independently, so a prefix is a random subsample), and the one-sided test.
-    `decide`: the margin at which the caller calls the pair `similar` from this evidence; a direction
-    of the one-sided test whose coverage alone is that far past its tolerance is not measured (its
-    margin can only be larger), and that bound stands for it: the decision is the one the full test
-    would give, the margin said may be lower than the full test's when the pair is `similar`."""
+    `decide`: the margin at which the caller calls the pair `similar` from this evidence (and otherwise
+    uses it for nothing); the one-sided test is skipped when the symmetric margin is under it, and a
+    direction whose coverage alone is that far past its tolerance is not measured (its margin can only
+    be larger) and that bound stands for it: the decision is the one the full test would give, the
+    margin said may differ from the full test's where it decides nothing or the pair is `similar`."""
     diag = b.diagonal
     ab = b.distance_to(sim.apply(a.samples[0][:points]))  # (N,) a's samples to b's surface
     ba = a.distance_to(_inverse(sim).apply(b.samples[0][:points])) * sim.scale  # (N,) b's to a's, b's units
@@ -285,7 +286,9 @@ def _evidence(
     margin = max(chamfer / CHAMFER_MAX, hausdorff / HAUSDORFF_MAX)
     extra: dict = {}
     a_edge, b_edge = a.mean_edge * sim.scale / diag, b.mean_edge / diag
-    if one_sided and margin >= 1.0 and chamfer < ONE_SIDED_CHAMFER:  # a coarser copy on the finer surface?
+    # a coarser copy on the finer surface? (not asked when the symmetric margin is already under the
+    # caller's `decide`: the pair goes on to more work whatever the one-sided test says)
+    if one_sided and max(1.0, decide or 1.0) <= margin and chamfer < ONE_SIDED_CHAMFER:
         # "a lies on b" (a's vertices to b, b's samples covered by a), then "b lies on a"
         bounds = (cover_margin(ba / diag, a_edge, b_edge), cover_margin(ab / diag, b_edge, a_edge))
         skipped = [m for m in bounds if decide is not None and m >= decide]  # their margins are >= these
