@@ -40,6 +40,7 @@ SCREEN_KEEP = 2  # ... and the best this many of each handedness go on (the 8 si
 SCREEN_KEEP_EXACT = 4  # ... or this many when the face counts allow the same triangles (all 8 kept)
 MIRROR_MARGIN = 0.8  # an improper fit wins only when its ICP cost is 20 % lower
 REFINE = 2  # hypotheses of each handedness polished on FINE_POINTS when the quick decision is not made
+FINE_SETTLE = 5  # ... of which the best of each handedness, after this many rounds, goes on alone
 QUICK_POINTS = 256  # the best fit polished (QUICK_ROUNDS) and the distances measured on this many first ...
 QUICK_ROUNDS = 8
 QUICK_MARGIN = 4.0  # ... and four times past every tolerance there is `similar` without more work
@@ -153,8 +154,7 @@ def verify(a: Prepared, b: Prepared) -> Evidence:
     # (the centroids already meet at 0)
     rough = [r[1] for r in ranked if not r[1].mirrored][:REFINE]
     rough += [r[1] for r in ranked if r[1].mirrored][:REFINE]
-    fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
-    cost, best = _polished(a, b, fine, [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough])
+    cost, best = _fine_fit(a, b, rough)
     exact = _exact(a, b, best) if same_count else None  # the same vertices after all?
     if exact is not None:
         return _exact_evidence(b, *exact)
@@ -163,6 +163,22 @@ def verify(a: Prepared, b: Prepared) -> Evidence:
     if middle.relation == "similar" and middle.confidence >= 1.0 - 0.5 / MIDDLE_MARGIN:
         return middle
     return _evidence(a, b, best)
+
+
+def _fine_fit(a: Prepared, b: Prepared, rough: list[Similarity]) -> tuple[float, Similarity]:
+    """_polished() on FINE_POINTS of a's samples from the turns of the rough fits (the centroids
+    already meet at 0); of more than 2 of them, only the best of each handedness after FINE_SETTLE
+    rounds goes on (both samples' verdicts unchanged: docs/variants.md)."""
+    fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
+    starts, rounds = [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough], ICP_ITERATIONS
+    if len(starts) > 2:
+        fits, costs = icp_batch(fine, b.normalised_tree, b.normalised_samples, starts, FINE_SETTLE,
+                                with_scale=True)
+        ranked = sorted(zip(costs.tolist(), fits, strict=True), key=lambda f: f[0])
+        starts = [next(f for _, f in ranked if f.mirrored == m) for m in (False, True)
+                  if any(f.mirrored == m for f in fits)]
+        rounds -= FINE_SETTLE
+    return _polished(a, b, fine, starts, rounds)
 
 
 def _same_order_fit(a: Prepared, b: Prepared) -> Similarity | None:
