@@ -71,7 +71,7 @@ def instrument(stages: Stages) -> ModuleType:
     stages.wrap(r, "_parts_in", "objects (_parts_in, its verifications included)")
     stages.wrap(r, "_exact", "same-triangles test")
     stages.wrap(r, "_hypotheses", "hypotheses (screen + coarse ICP)")
-    quick = r.QUICK_ROUNDS  # _polished(a, b, points, rough, rounds): only the quick one passes rounds
+    quick = r.QUICK_ROUNDS  # _polished(a, b, points, rough, rounds): the quick polish runs QUICK_ROUNDS
     stages.wrap(r, "_polished", lambda a, k: "quick polish (256 points)" if len(a) > 4 and a[4] == quick
                 else None)  # the fine one is inside _fine_fit
     stages.wrap(r, "_fine_fit", "fine polish (1,024 points)")
