@@ -36,11 +36,15 @@ class Stages:
         self.seconds: defaultdict[str, float] = defaultdict(float)
         self.calls: defaultdict[str, int] = defaultdict(int)
 
-    def wrap(self, module: ModuleType, name: str, label: Callable[[tuple, dict], str] | str) -> None:
+    def wrap(self, module: ModuleType, name: str, label: Callable[[tuple, dict], str | None] | str) -> None:
+        """`label`: the stage's name, or a function of the call's arguments giving it (None: not timed,
+        the call is part of a stage timed around it)."""
         real = getattr(module, name)
 
         def timed(*args: object, **kwargs: object) -> object:
             key = label(args, kwargs) if callable(label) else label
+            if key is None:
+                return real(*args, **kwargs)
             start = time.process_time()
             try:
                 return real(*args, **kwargs)
@@ -67,9 +71,10 @@ def instrument(stages: Stages) -> ModuleType:
     stages.wrap(r, "_parts_in", "objects (_parts_in, its verifications included)")
     stages.wrap(r, "_exact", "same-triangles test")
     stages.wrap(r, "_hypotheses", "hypotheses (screen + coarse ICP)")
-    quick = r.QUICK_ROUNDS  # _polished(a, b, points, rough, rounds): only the quick one passes rounds
+    quick = r.QUICK_ROUNDS  # _polished(a, b, points, rough, rounds): the quick polish runs QUICK_ROUNDS
     stages.wrap(r, "_polished", lambda a, k: "quick polish (256 points)" if len(a) > 4 and a[4] == quick
-                else "fine polish (1,024 points)")
+                else None)  # the fine one is inside _fine_fit
+    stages.wrap(r, "_fine_fit", "fine polish (1,024 points)")
     stages.wrap(r, "_evidence", lambda a, k: {r.QUICK_POINTS: "quick distances (256 samples)",
                                               r.MIDDLE_POINTS: "middle distances (512 samples)"}.get(
                                                   k.get("points"), "full distances (2,048 samples)"))

@@ -77,6 +77,12 @@ class PreparedCache:
                 return found
             self.misses += 1
         prepared = Prepared(load())  # outside the lock: parsing a large file must not hold up others
+        self.put(key, prepared)
+        return prepared
+
+    def put(self, key: tuple[str, str], prepared: Prepared) -> None:
+        """Keep `prepared` as the stored file `key`'s mesh (a no-op when one is kept already), within
+        the bounds."""
         n = prepared.mesh.n_vertices
         with self._lock:
             if key not in self._items and n <= self.max_vertices:
@@ -85,7 +91,6 @@ class PreparedCache:
                 while len(self._items) > self.max_models or self._vertices > self.max_vertices:
                     _, old = self._items.popitem(last=False)
                     self._vertices -= old.mesh.n_vertices
-        return prepared
 
 
 _CACHES: dict[str, FingerprintCache] = {}
@@ -129,15 +134,19 @@ def detect(ctx: ServiceContext, model_id: int, mesh: Mesh) -> list[dict]:
     vectors = fingerprints(prepared)
     candidates = _cache(ctx).candidates(ctx, vectors, exclude=model_id)
     with ctx.db.write() as conn:
-        if models_repo.get(conn, model_id) is None:
+        model = models_repo.get(conn, model_id)
+        if model is None:
             return []  # deleted meanwhile
         variants_repo.put_fingerprints(conn, model_id, FINGERPRINT_VERSION, vectors)
+    # `mesh` is the stored file's (both callers parse it from the blob as stored_prepared would): the
+    # next ingests in this process that meet the model as a candidate neither re-read nor re-prepare it
+    prepared_cache(ctx).put((model.sha256, model.file_type), prepared)
+    # the gate rules out every pair of their fingerprints: `similar`, the file unread
+    screened = [c for c in candidates if may_relate_any(vectors, _cache(ctx).rows(c))]
+    with ctx.db.read() as conn:  # one connection for the candidates' records
+        others = [models_repo.get(conn, c) for c in screened]
     found = []
-    for other_id in candidates:
-        if not may_relate_any(vectors, _cache(ctx).rows(other_id)):
-            continue  # the gate rules out every pair of their fingerprints: `similar`, its file unread
-        with ctx.db.read() as conn:
-            other = models_repo.get(conn, other_id)
+    for other_id, other in zip(screened, others, strict=True):
         if other is None or other.status == "failed":
             continue
         try:

@@ -159,3 +159,61 @@ def test_cover_margin_by_hand_and_as_a_lower_bound_of_the_side_margin() -> None:
     assert side(vertices, other, 0.05, 0.05)[4] == pytest.approx(cover_margin(other, 0.05, 0.05))
     far = np.full(50, 0.2)  # vertices off the surface raise the margin above the bound
     assert side(far, other, 0.05, 0.05)[4] > cover_margin(other, 0.05, 0.05)
+
+
+@pytest.mark.parametrize("subdivisions", [0, 1, 3])
+def test_distance_to_surface_is_the_exact_point_to_triangle_distance(subdivisions: int) -> None:
+    """Against every face by brute force: a coarse mesh (many repeated candidate faces per point) and
+    a fine one, points on, inside and outside the surface."""
+    from app.core.variants.surface import closest_on_triangles
+
+    tm = trimesh.creation.icosphere(subdivisions=subdivisions)
+    mesh = Mesh(np.asarray(tm.vertices), np.asarray(tm.faces, np.int64))
+    rng = np.random.default_rng(subdivisions)
+    directions = rng.standard_normal((300, 3))
+    points = directions / np.linalg.norm(directions, axis=1)[:, None] * rng.uniform(0.8, 1.2, (300, 1))
+    got = Prepared(mesh).distance_to(points)
+    v, f = mesh.vertices, mesh.faces
+    p = np.repeat(points, len(f), axis=0)
+    tiled = np.tile(f, (len(points), 1))
+    near = closest_on_triangles(p, v[tiled[:, 0]], v[tiled[:, 1]], v[tiled[:, 2]])
+    expected = np.linalg.norm(near - p, axis=1).reshape(len(points), len(f)).min(axis=1)
+    assert got.shape == (300,)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+    assert got.max() > 0.1  # the points are off the surface, not only on it
+
+
+def test_a_direction_skipped_on_its_coverage_leaves_the_decision_as_the_full_test_gives_it() -> None:
+    """_evidence(decide=d) measures the one-sided test only where the symmetric margin reaches d, and a
+    direction of it only when its coverage alone is under d: on spheres, ellipsoids and a capsule at
+    several resolutions, in place, every `similar` decision at d is the full test's, and a pair it
+    still calls retriangulated has the full test's evidence."""
+    from app.core.variants.align import Similarity
+
+    r = importlib.import_module("app.core.variants.relate")
+
+    def prepared(tm: trimesh.Trimesh) -> Prepared:
+        return Prepared(Mesh(np.asarray(tm.vertices, float), np.asarray(tm.faces, np.int64)))
+
+    shapes = [prepared(trimesh.creation.icosphere(1)), prepared(trimesh.creation.icosphere(3)),
+              prepared(trimesh.creation.icosphere(3).apply_scale(1.08)),
+              prepared(trimesh.creation.icosphere(3).apply_scale([1.0, 1.0, 0.8])),
+              prepared(trimesh.creation.icosphere(1).apply_scale([1.15, 1.0, 0.85])),
+              prepared(trimesh.creation.capsule(1.0, 0.8))]
+    in_place = Similarity(1.0, np.eye(3), np.zeros(3))
+    skipped = undecided = 0
+    for a in shapes:
+        for b in shapes:
+            if a is b:
+                continue
+            full = r._evidence(a, b, in_place, points=256)
+            for decide in (2.0, 4.0):
+                fast = r._evidence(a, b, in_place, points=256, decide=decide)
+                at = 1.0 - 0.5 / decide
+                decided = [e.relation == "similar" and e.confidence >= at for e in (fast, full)]
+                assert decided[0] == decided[1]
+                if fast.relation == "retriangulated":
+                    assert fast == full
+                skipped += fast.confidence != full.confidence
+                undecided += not decided[0] and fast.lies_on_other is None and full.lies_on_other is not None
+    assert skipped >= 4 and undecided >= 2  # work was skipped, on decided and undecided pairs

@@ -120,3 +120,18 @@ def test_reverse_says_which_one_lies_on_the_other() -> None:
     assert back["lies_on_other"] is False and (back["forward"], back["reverse"]) == (0.9, 1.0)
     assert back["scale"] == 0.5 and variants.reverse(back)["lies_on_other"] is True
     assert variants.reverse({**evidence, "lies_on_other": None})["lies_on_other"] is None
+
+
+def test_detect_keeps_the_new_model_prepared_for_the_next_ingests(tmp_path):
+    ctx = open_context(make_settings(tmp_path / "d"))
+    cache = variants.prepared_cache(ctx, variants.PreparedCache())
+    a = _stored_ready(ctx, _hull_bytes(), "a.stl")
+    b = _stored_ready(ctx, _hull_bytes(scale=25.4), "b.stl")
+    report = variants.backfill(ctx)  # a's detect keeps a; b's meets a in the cache, never re-reads it
+    assert (report["fingerprinted"], report["links"]) == (2, 1)
+    assert (cache.hits, cache.misses, len(cache)) == (1, 0, 2)
+    with ctx.db.read() as conn:
+        stored = models_repo.get(conn, a)
+    kept = cache.get((stored.sha256, stored.file_type), lambda: pytest.fail("re-read a kept model"))
+    assert kept.mesh.n_vertices == hull_trimesh(5).vertices.shape[0]
+    assert _links(ctx, a) == [(b, a, "rescaled")]

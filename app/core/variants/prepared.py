@@ -93,14 +93,16 @@ class Prepared:
         (the nearest face is among them unless it is far smaller than the sample spacing)."""
         _, idx = self.sample_tree.query(points, k=k, workers=1)  # (n, k)
         _, vertex = self.vertex_tree.query(points, workers=1)  # (n,): the faces around it catch thin parts
-        candidates = np.concatenate([self.samples[2][idx], self.vertex_faces[vertex]], axis=1)
-        k = candidates.shape[1]
-        faces = self.mesh.faces[candidates]  # (n, k, 3)
-        v = self.mesh.vertices
-        p = np.repeat(points, k, axis=0)
-        flat = faces.reshape(-1, 3)
+        candidates = np.sort(np.concatenate([self.samples[2][idx], self.vertex_faces[vertex]], axis=1))
+        # each (point, face) pair once: near samples share faces, and a vertex's row repeats its faces
+        first = np.ones(candidates.shape, dtype=bool)
+        first[:, 1:] = candidates[:, 1:] != candidates[:, :-1]
+        row, col = np.nonzero(first)  # row-major: each point's pairs together, every point has one
+        flat = self.mesh.faces[candidates[row, col]]  # (pairs, 3)
+        v, p = self.mesh.vertices, points[row]
         near = closest_on_triangles(p, v[flat[:, 0]], v[flat[:, 1]], v[flat[:, 2]])
-        return np.linalg.norm(near - p, axis=1).reshape(-1, k).min(axis=1)
+        start = np.concatenate([[0], np.cumsum(first.sum(axis=1))[:-1]])  # (n,) each point's first pair
+        return np.minimum.reduceat(np.linalg.norm(near - p, axis=1), start)
 
     @cached_property
     def vertex_faces(self) -> np.ndarray:

@@ -24,7 +24,7 @@ import numpy as np
 
 from app.core.variants.align import ICP_ITERATIONS, Similarity, hypotheses, icp_batch, to_world, umeyama
 from app.core.variants.gate import RADIUS, may_relate
-from app.core.variants.onesided import cover_margin, lies_on, vertex_subset
+from app.core.variants.onesided import LiesOn, cover_margin, side, vertex_subset
 from app.core.variants.prepared import Prepared, face_keys
 
 RELATIONS = ("identical", "moved", "rescaled", "mirrored", "retriangulated", "part_of", "contains", "similar")
@@ -40,6 +40,7 @@ SCREEN_KEEP = 2  # ... and the best this many of each handedness go on (the 8 si
 SCREEN_KEEP_EXACT = 4  # ... or this many when the face counts allow the same triangles (all 8 kept)
 MIRROR_MARGIN = 0.8  # an improper fit wins only when its ICP cost is 20 % lower
 REFINE = 2  # hypotheses of each handedness polished on FINE_POINTS when the quick decision is not made
+FINE_SETTLE = 5  # ... of which the best of each handedness, after this many rounds, goes on alone
 QUICK_POINTS = 256  # the best fit polished (QUICK_ROUNDS) and the distances measured on this many first ...
 QUICK_ROUNDS = 8
 QUICK_MARGIN = 4.0  # ... and four times past every tolerance there is `similar` without more work
@@ -144,25 +145,40 @@ def verify(a: Prepared, b: Prepared) -> Evidence:
     rough = [proper[1]] + [r[1] for r in ranked if r[1].mirrored and r[0] < proper[0]][:1]
     quick_points = a.normalised_samples[:: max(1, len(a.normalised_samples) // QUICK_POINTS)]
     _, quick_fit = _polished(a, b, quick_points, rough, QUICK_ROUNDS)
-    quick = _evidence(a, b, quick_fit, points=QUICK_POINTS)
     firm = min(a.mesh.n_vertices, b.mesh.n_vertices) >= FIRM_VERTICES
     quick_margin = QUICK_MARGIN_FIRM if firm else QUICK_MARGIN
+    quick = _evidence(a, b, quick_fit, points=QUICK_POINTS, decide=quick_margin)
     if quick.relation == "similar" and quick.confidence >= 1.0 - 0.5 / quick_margin:
         return quick  # far from any relation on a subsample (margin >= quick_margin): decided
     # undecided: the best REFINE of each handedness polished on more points, from their turns alone
     # (the centroids already meet at 0)
     rough = [r[1] for r in ranked if not r[1].mirrored][:REFINE]
     rough += [r[1] for r in ranked if r[1].mirrored][:REFINE]
-    fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
-    cost, best = _polished(a, b, fine, [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough])
+    cost, best = _fine_fit(a, b, rough)
     exact = _exact(a, b, best) if same_count else None  # the same vertices after all?
     if exact is not None:
         return _exact_evidence(b, *exact)
     # under the final fit, a quarter of the samples first: twice past every tolerance there is `similar`
-    middle = _evidence(a, b, best, points=MIDDLE_POINTS)
+    middle = _evidence(a, b, best, points=MIDDLE_POINTS, decide=MIDDLE_MARGIN)
     if middle.relation == "similar" and middle.confidence >= 1.0 - 0.5 / MIDDLE_MARGIN:
         return middle
     return _evidence(a, b, best)
+
+
+def _fine_fit(a: Prepared, b: Prepared, rough: list[Similarity]) -> tuple[float, Similarity]:
+    """_polished() on FINE_POINTS of a's samples from the turns of the rough fits (the centroids
+    already meet at 0); of more than 2 of them, only the best of each handedness after FINE_SETTLE
+    rounds goes on (both samples' verdicts unchanged: docs/variants.md)."""
+    fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
+    starts, rounds = [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough], ICP_ITERATIONS
+    if len(starts) > 2:
+        fits, costs = icp_batch(fine, b.normalised_tree, b.normalised_samples, starts, FINE_SETTLE,
+                                with_scale=True)
+        ranked = sorted(zip(costs.tolist(), fits, strict=True), key=lambda f: f[0])
+        starts = [next(f for _, f in ranked if f.mirrored == m) for m in (False, True)
+                  if any(f.mirrored == m for f in fits)]
+        rounds -= FINE_SETTLE
+    return _polished(a, b, fine, starts, rounds)
 
 
 def _same_order_fit(a: Prepared, b: Prepared) -> Similarity | None:
@@ -266,12 +282,16 @@ def _exact_evidence(b: Prepared, sim: Similarity, residual: float) -> Evidence:
 
 
 def _evidence(
-    a: Prepared, b: Prepared, sim: Similarity, one_sided: bool = True, points: int | None = None
+    a: Prepared, b: Prepared, sim: Similarity, one_sided: bool = True, points: int | None = None,
+    decide: float | None = None,
 ) -> Evidence:
     """The surface distances under `sim` (a's and b's samples, or the first `points` of them: the
-    samples are drawn independently, so a prefix is a random subsample), and the one-sided test
-    (on a subsample, skipped when the coverage alone puts it QUICK_MARGIN past its tolerance: the
-    margin said is then that bound)."""
+    samples are drawn independently, so a prefix is a random subsample), and the one-sided test.
+    `decide`: the margin at which the caller calls the pair `similar` from this evidence (and otherwise
+    uses it for nothing); the one-sided test is skipped when the symmetric margin is under it, and a
+    direction whose coverage alone is that far past its tolerance is not measured (its margin can only
+    be larger) and that bound stands for it: the decision is the one the full test would give, the
+    margin said may differ from the full test's where it decides nothing or the pair is `similar`."""
     diag = b.diagonal
     ab = b.distance_to(sim.apply(a.samples[0][:points]))  # (N,) a's samples to b's surface
     ba = a.distance_to(_inverse(sim).apply(b.samples[0][:points])) * sim.scale  # (N,) b's to a's, b's units
@@ -282,22 +302,26 @@ def _evidence(
     margin = max(chamfer / CHAMFER_MAX, hausdorff / HAUSDORFF_MAX)
     extra: dict = {}
     a_edge, b_edge = a.mean_edge * sim.scale / diag, b.mean_edge / diag
-    if points is not None and one_sided and margin >= 1.0 and chamfer < ONE_SIDED_CHAMFER:
-        # on a subsample, a coverage far outside both directions' tolerances decides without the vertices
-        bound = min(cover_margin(ba / diag, a_edge, b_edge), cover_margin(ab / diag, b_edge, a_edge))
-        if bound >= QUICK_MARGIN:
-            one_sided, margin = False, min(margin, bound)
-    if one_sided and margin >= 1.0 and chamfer < ONE_SIDED_CHAMFER:  # a coarser copy on the finer surface?
-        inverse = _inverse(sim)
-        on = lies_on(
-            b.distance_to(sim.apply(vertex_subset(a.mesh, points, a.used_vertices))) / diag,
-            ba / diag, a_edge,
-            a.distance_to(inverse.apply(vertex_subset(b.mesh, points, b.used_vertices))) * sim.scale / diag,
-            ab / diag, b_edge,
-        )
-        extra = {"lies_on_other": on.a_on_b, "resolution": on.resolution, "slack": on.slack,
-                 "vertex_gap": on.vertex_gap, "uncovered": on.uncovered}
-        margin = min(margin, on.margin)
+    # a coarser copy on the finer surface? (not asked when the symmetric margin is already under the
+    # caller's `decide`: the pair goes on to more work whatever the one-sided test says)
+    if one_sided and max(1.0, decide or 1.0) <= margin and chamfer < ONE_SIDED_CHAMFER:
+        # "a lies on b" (a's vertices to b, b's samples covered by a), then "b lies on a"
+        bounds = (cover_margin(ba / diag, a_edge, b_edge), cover_margin(ab / diag, b_edge, a_edge))
+        skipped = [m for m in bounds if decide is not None and m >= decide]  # their margins are >= these
+        sides: list[LiesOn] = []
+        if decide is None or bounds[0] < decide:
+            gaps = b.distance_to(sim.apply(vertex_subset(a.mesh, points, a.used_vertices))) / diag
+            sides.append(LiesOn(True, *side(gaps, ba / diag, a_edge, b_edge)))
+        if decide is None or bounds[1] < decide:
+            back = _inverse(sim).apply(vertex_subset(b.mesh, points, b.used_vertices))
+            gaps = a.distance_to(back) * sim.scale / diag
+            sides.append(LiesOn(False, *side(gaps, ab / diag, b_edge, a_edge)))
+        if sides:
+            on = min(sides, key=lambda o: o.margin)  # the better direction ("a lies on b" on a tie)
+            extra = {"lies_on_other": on.a_on_b, "resolution": on.resolution, "slack": on.slack,
+                     "vertex_gap": on.vertex_gap, "uncovered": on.uncovered}
+            margin = min(margin, on.margin)
+        margin = min([margin, *skipped])
     if margin < 1.0:
         relation, confidence = "retriangulated", 1.0 - 0.5 * margin
     else:
