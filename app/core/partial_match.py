@@ -9,8 +9,10 @@ lacks costs a bounded amount) wins; under it
   between grid steps by a parabola through the scores): the area of the model the matched part of the
   query stands for, over the model's area. Counting the model samples that some query sample matches
   would count both legs for one (the slopes are the same on symmetric parts); the scale does not.
-The distance ranks candidates; forward and reverse are what a user reads. `head` keeps a signature's
-first samples: a coarser farthest-point sample of the same shape, for a cheap first pass over many models.
+The distance ranks candidates; forward and reverse are what a user reads, and `region` where: the share
+of the query's area each model sample matches under the winning scale (what the page's 3D view colours).
+`head` keeps a signature's first samples: a coarser farthest-point sample of the same shape, for a cheap
+first pass over many models.
 """
 
 from __future__ import annotations
@@ -33,14 +35,29 @@ class PartialMatch:
     forward: float  # in [0, 1]
     reverse: float  # in [0, 1]
     scale: float  # kept share the winning scale implies (1: the query is as large as the model)
+    shift: int = 0  # the winning scale hypothesis (the query grid's window), which `region` reads
+
+
+@dataclass(frozen=True)
+class Region:
+    """Where a query matched in one model, per model sample.
+
+    vertex : (p,) int32, the model's sample vertices (LocalSignature.vertex)
+    weight : (p,) float64, the share of the query's trusted area whose nearest model sample this is,
+             within the tolerance (sums to the match's forward score; 0 where nothing matched)
+    """
+
+    vertex: np.ndarray
+    weight: np.ndarray
 
 
 def head(signature: LocalSignature, count: int) -> LocalSignature:
     """The first `count` samples of a signature: local_signature stores them in farthest-point order,
     so they are a coarser farthest-point sample of the same surface (their areas are renormalised by
     match_many over the trusted ones)."""
+    vertex = None if signature.vertex is None else signature.vertex[:count]
     return LocalSignature(slopes=signature.slopes[:count], area=signature.area[:count],
-                          valid=signature.valid[:count], rim=signature.rim)
+                          valid=signature.valid[:count], rim=signature.rim, vertex=vertex)
 
 
 def _sq_distances(q: np.ndarray, qvalid: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -106,5 +123,29 @@ def match_many(query: LocalSignature, models: Sequence[LocalSignature], params: 
     for c, i in enumerate(usable):
         fwd = float(min(forwards[best[c], c], 1.0))
         out[i] = PartialMatch(distance=float(min(finite[best[c], c], cap)), forward=fwd,
-                              reverse=float(min(fwd * scale[c], 1.0)), scale=float(scale[c]))
+                              reverse=float(min(fwd * scale[c], 1.0)), scale=float(scale[c]),
+                              shift=int(best[c]))
     return out
+
+
+def region(query: LocalSignature, model: LocalSignature, shift: int, params: LocalParams,
+           tolerance: float = TOLERANCE) -> Region | None:
+    """The model samples the query's trusted samples match under scale hypothesis `shift` (a
+    PartialMatch's), weighted by the query area each stands for; None when the model's signature has no
+    sample vertices (saved before they were stored). One match's cost: the hits of a page, not the
+    candidates, get one."""
+    if model.vertex is None:
+        return None
+    width = params.slopes
+    weight = np.zeros(len(model.slopes))
+    qvalid = np.minimum(query.valid.astype(np.int64) - shift, width)
+    rows = qvalid >= MIN_SLOPES
+    cols = np.flatnonzero(model.valid >= MIN_SLOPES)
+    if rows.any() and len(cols) and query.slopes.shape[1] >= shift + width:
+        d = _sq_distances(query.slopes[rows, shift:shift + width], qvalid[rows], model.slopes[cols, :width])
+        nearest = np.argmin(d, axis=1)  # (p',) into cols
+        hit = d[np.arange(len(nearest)), nearest] <= tolerance
+        qa = query.area[rows].astype(np.float64)
+        qa = qa / qa.sum()
+        np.add.at(weight, cols[nearest[hit]], qa[hit])
+    return Region(vertex=model.vertex.astype(np.int32), weight=weight)

@@ -10,6 +10,8 @@ distance (app.core.partial_match). A closed query keeps the global ranking exact
 forward and reverse scores either way.
 Models described before the local signature existed (description format < 3) have none: they get no
 scores and, in a re-ranking, follow the models that have one, in their global order.
+The hits a piece's search returns (at most search.MAX_K) also get their matched region: the model
+samples the query matched, which the page's 3D view colours.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from app.core.partial import LocalSignature
-from app.core.partial_match import PartialMatch, head, match_many
+from app.core.partial_match import PartialMatch, Region, head, match_many, region
 from app.core.pipeline import LOCAL, load_local
 from app.services.context import ServiceContext
 
@@ -117,3 +119,17 @@ def score(ctx: ServiceContext, query: LocalSignature | None,
     if query is None:
         return [None] * len(model_ids)
     return _matches(ctx, query, model_ids, SCORE_BUDGET_S)
+
+
+def regions(ctx: ServiceContext, query: LocalSignature | None, model_ids: Sequence[int],
+            found: Sequence[PartialMatch | None]) -> list[Region | None]:
+    """Where the query matched in each model (found: its PartialMatch, None: unscored), one match each:
+    the k hits of a page, read from the signature cache the scoring filled."""
+    out: list[Region | None] = [None] * len(model_ids)
+    if query is None:
+        return out
+    for j, (model_id, m) in enumerate(zip(model_ids, found, strict=True)):
+        sig = _CACHE.get(ctx.blobs.description_path(model_id)) if m is not None else None
+        if sig is not None and m is not None:
+            out[j] = region(query, sig, m.shift, LOCAL)
+    return out

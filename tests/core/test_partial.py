@@ -19,7 +19,7 @@ from app.core.partial import (
     rim_distance,
     rim_length,
 )
-from app.core.partial_match import CAP, match_many
+from app.core.partial_match import CAP, head, match_many, region
 from app.core.resolution import normalize_scale
 from app.core.spectrum import Spectrum, smallest_eigenpairs
 
@@ -192,3 +192,51 @@ def test_an_unmatched_part_of_the_query_costs_its_area_times_the_cap():
         assert m.distance == pytest.approx(0.3 * CAP)
         assert m.forward == pytest.approx(0.7) and m.scale == pytest.approx(1.0)
         assert m.reverse == pytest.approx(0.7)
+
+
+def test_the_region_is_where_the_query_matched_and_sums_to_forward():
+    """By hand: the query's first sample (area 0.7) equals the model's first, its second matches
+    nothing; the region puts 0.7 on the model's first sample's vertex and nothing elsewhere."""
+    width = PARAMS.slopes + PARAMS.shifts - 1
+    model = LocalSignature(slopes=np.array([[0.0] * width, [-1.0] * width, [0.01] * width], np.float32),
+                           area=np.full(3, 1 / 3, np.float32), valid=np.array([width, width, 2], np.int16),
+                           rim=0.0, vertex=np.array([10, 20, 30], np.int32))
+    query = LocalSignature(slopes=np.array([[0.0] * width, [5.0] * width], np.float32),
+                           area=np.array([0.7, 0.3], np.float32), valid=np.array([width, width], np.int16),
+                           rim=1.0)
+    (m,) = match_many(query, [model], PARAMS)
+    got = region(query, model, m.shift, PARAMS)
+    assert got is not None
+    assert got.vertex.tolist() == [10, 20, 30]
+    # the third model sample is nearer but sits on the rim (2 trusted slopes): never compared
+    assert got.weight == pytest.approx([0.7, 0.0, 0.0])
+    assert got.weight.sum() == pytest.approx(m.forward)
+    assert region(query, LocalSignature(model.slopes, model.area, model.valid, 0.0), 0, PARAMS) is None
+
+
+def test_a_pieces_region_sums_to_its_forward_score():
+    """A capsule's upper part against the whole: the matched model samples' weights sum to forward
+    (the same nearest samples at the winning scale), on the model's own sample vertices. Where the
+    region lies is tested on an articulated body through the API (tests/api/test_partial_api.py)."""
+    whole = trimesh.creation.capsule(height=3.0, radius=0.5, count=[24, 24])
+    keep = whole.triangles_center[:, 2] > -0.4
+    piece_t = trimesh.Trimesh(whole.vertices, whole.faces[keep], process=True)
+    model_mesh = unit_mesh(whole)
+    m_spec, m_mass = spectrum_of(model_mesh)
+    model = local_signature(m_spec, model_mesh.vertices, model_mesh.faces, m_mass,
+                            np.zeros(model_mesh.n_vertices, bool), PARAMS)
+    assert model.vertex is not None
+    assert model.vertex.tolist() == farthest_points(model_mesh.vertices, 64).tolist()
+    piece = unit_mesh(piece_t)
+    p_spec, p_mass = spectrum_of(piece)
+    query = local_signature(p_spec, piece.vertices, piece.faces, p_mass,
+                            free_boundary(piece.faces, piece.n_vertices), PARAMS)
+    (m,) = match_many(query, [model], PARAMS)
+    got = region(query, model, m.shift, PARAMS)
+    assert got is not None and m.forward > 0.05
+    assert got.weight.sum() == pytest.approx(m.forward)
+    # under another scale hypothesis the region is another one, and sums to that hypothesis's forward
+    other = region(query, model, (m.shift + 3) % PARAMS.shifts, PARAMS)
+    assert other is not None and not np.array_equal(other.weight, got.weight)
+    coarse = head(model, 8)
+    assert coarse.vertex is not None and coarse.vertex.tolist() == model.vertex[:8].tolist()
