@@ -19,7 +19,7 @@ from app.core.partial import (
     rim_distance,
     rim_length,
 )
-from app.core.partial_match import CAP, head, match_many, region
+from app.core.partial_match import CAP, head, match_many, region, regions
 from app.core.resolution import normalize_scale
 from app.core.spectrum import Spectrum, smallest_eigenpairs
 
@@ -238,5 +238,18 @@ def test_a_pieces_region_sums_to_its_forward_score():
     # under another scale hypothesis the region is another one, and sums to that hypothesis's forward
     other = region(query, model, (m.shift + 3) % PARAMS.shifts, PARAMS)
     assert other is not None and not np.array_equal(other.weight, got.weight)
+    # the batched form (a page's hits, grouped by shift into one product) gives each model's region as
+    # region() alone does: two models share a product here, one has no vertices, one is on its own
+    fewer = head(model, 40)
+    bare = LocalSignature(model.slopes, model.area, model.valid, 0.0)
+    other = (m.shift + 3) % PARAMS.shifts
+    models, shifts = [model, fewer, bare, model], [m.shift, m.shift, m.shift, other]
+    batched = regions(query, models, shifts, PARAMS)
+    assert batched[2] is None
+    for i in (0, 1, 3):
+        alone = regions(query, [models[i]], [shifts[i]], PARAMS)[0]
+        assert batched[i] is not None and alone is not None
+        assert np.array_equal(batched[i].weight, alone.weight)
+        assert batched[i].vertex.tolist() == models[i].vertex.tolist()
     coarse = head(model, 8)
     assert coarse.vertex is not None and coarse.vertex.tolist() == model.vertex[:8].tolist()
