@@ -103,14 +103,14 @@ def search_description(
 def _scored(ctx: ServiceContext, description: ShapeDescription, hits: list[Hit], k: int,
             piece: bool) -> list[Hit]:
     """The first k hits with their forward / reverse scores; a piece's candidates (app.services.partial)
-    ordered by partial distance (models without a local signature after, in their global order)."""
+    ordered by partial score (models without a local signature after, in their global order)."""
     if piece:  # the candidates include the global GLOBAL_KEEP >= k nearest: no other hit is needed
         hits = [hits[j] for j in partial_mod.candidates(ctx, description.local, [h.model.id for h in hits])]
     else:
         hits = hits[:k]
     found = partial_mod.score(ctx, description.local, [h.model.id for h in hits])
     if piece:
-        rank_of = [m.distance if m is not None else float("inf") for m in found]
+        rank_of = [m.score if m is not None else float("inf") for m in found]
         order = sorted(range(len(hits)), key=lambda j: (rank_of[j], j))
         hits, found = [hits[j] for j in order[:k]], [found[j] for j in order[:k]]
     ids = [h.model.id for h in hits]

@@ -19,7 +19,7 @@ from app.core.partial import (
     rim_distance,
     rim_length,
 )
-from app.core.partial_match import CAP, head, match_many, region, regions
+from app.core.partial_match import CAP, MUTUAL, head, match_many, mutual_shares, region, regions
 from app.core.resolution import normalize_scale
 from app.core.spectrum import Spectrum, smallest_eigenpairs
 
@@ -253,3 +253,26 @@ def test_a_pieces_region_sums_to_its_forward_score():
         assert batched[i].vertex.tolist() == models[i].vertex.tolist()
     coarse = head(model, 8)
     assert coarse.vertex is not None and coarse.vertex.tolist() == model.vertex[:8].tolist()
+
+
+def test_the_mutual_share_counts_one_to_one_matches_and_lowers_the_score():
+    """By hand: query samples q0 (area 0.7, equal to model sample m0) and q1 (0.3, far from both). Both
+    have m0 as nearest; m0's nearest query sample is q0, m1's is q0 too (1 against 36): only q0's match
+    is one to one, so the mutual share is 0.7 and the score 0.3 CAP - MUTUAL x CAP x 0.7."""
+    width = PARAMS.slopes + PARAMS.shifts - 1
+    model = LocalSignature(slopes=np.array([[0.0] * width, [-1.0] * width], np.float32),
+                           area=np.array([0.5, 0.5], np.float32), valid=np.array([width, width], np.int16),
+                           rim=0.0)
+    query = LocalSignature(slopes=np.array([[0.0] * width, [5.0] * width], np.float32),
+                           area=np.array([0.7, 0.3], np.float32), valid=np.array([width, width], np.int16),
+                           rim=1.0)
+    (plain,) = match_many(query, [model], PARAMS)
+    (m,) = match_many(query, [model], PARAMS, mutual=True)
+    assert plain.mutual == 0.0 and plain.score == plain.distance  # not asked: the distance alone
+    assert m.mutual == pytest.approx(0.7)
+    assert m.score == pytest.approx(0.3 * CAP - MUTUAL * CAP * 0.7)
+    assert (m.distance, m.forward, m.reverse) == (plain.distance, plain.forward, plain.reverse)
+    # a model that also has a look-alike of q1 (m2, nearer to q1 than to q0): both match one to one
+    twice = LocalSignature(slopes=np.array([[0.0] * width, [0.0] * width, [4.0] * width], np.float32),
+                           area=np.full(3, 1 / 3, np.float32), valid=np.full(3, width, np.int16), rim=0.0)
+    assert mutual_shares(query, [twice, model], [0, 0], PARAMS) == pytest.approx([1.0, 0.7])
