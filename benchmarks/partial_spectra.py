@@ -1,6 +1,7 @@
 """Partial matching from cached eigenpairs: try local-signature grids without a second eigen-solve.
 
     python -m benchmarks.partial_spectra cache SRC QUERIES... --out var/spec [--workers 2] [--every 2]
+           [--classes a,b,c]
     python -m benchmarks.partial_spectra score SRC QUERIES --out var/spec [--rerank 100,200]
            [--classes a,b,c] [--set rim_factor=1.0 --set t0=0.004]
 
@@ -64,11 +65,14 @@ def _cache_one(job: tuple[str, str]) -> None:
     tmp.rename(out)
 
 
-def cache(folders: list[Path], out: Path, workers: int, every: int = 1) -> None:
-    """Cache every mesh of the first folder (the models) and every `every`-th of the others."""
+def cache(folders: list[Path], out: Path, workers: int, every: int = 1,
+          classes: set[str] | None = None) -> None:
+    """Cache every mesh of the first folder (the models) and every `every`-th of the others (of
+    `classes` only, when given; the every-th counts in the whole folder)."""
     out.mkdir(parents=True, exist_ok=True)
     jobs = [(str(r.path), str(out / f"{_key(f, r.path)}.npz"))
-            for i, f in enumerate(folders) for r in read_labelled_folder(f)[::every if i else 1]]
+            for i, f in enumerate(folders) for r in read_labelled_folder(f)[::every if i else 1]
+            if classes is None or r.label in classes]
     with ProcessPoolExecutor(workers) as pool:
         for i, _ in enumerate(pool.map(_cache_one, jobs, chunksize=4)):
             if i % 100 == 0:
@@ -142,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     folders = [_folder(f) for f in a.folders]
     if a.command == "cache":
-        cache(folders, a.out, a.workers, a.every)
+        cache(folders, a.out, a.workers, a.every, set(a.classes.split(",")) if a.classes else None)
         return 0
     changes = {k: type(getattr(LOCAL, k))(float(v)) for k, v in (s.split("=", 1) for s in a.set)}
     score(folders[0], folders[1], a.out, [int(n) for n in a.rerank.split(",")],

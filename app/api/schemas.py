@@ -144,6 +144,20 @@ class JobAccepted(BaseModel):
     state: str = STATE_ALIAS
 
 
+class MatchedRegion(BaseModel):
+    """Where a piece matched in a model: the model's local-signature samples (at most 256)."""
+
+    vertices: list[int] = Field(
+        description="sample vertices of the model, as indices into the `vertices` of GET"
+        " /models/{id}/explain (the mesh at the canonical resolution the description is of); each sample"
+        " stands for the surface nearer to it than to any other sample"
+    )
+    weights: list[float] = Field(
+        description="per sample, the share of the query's surface whose best match it is (within the"
+        " match tolerance, at the winning scale); they sum to `forward`, and 0 means nothing matched there"
+    )
+
+
 class SearchHit(BaseModel):
     model_id: int
     name: str
@@ -165,6 +179,10 @@ class SearchHit(BaseModel):
     )
     partial: bool = Field(
         False, description="true when the query was taken for a piece and the hits re-ranked by partial match"
+    )
+    region: MatchedRegion | None = Field(
+        None, description="a piece's hits (`partial` true): the region of the model the query matched; null"
+        " for a whole query, or a model described before its sample vertices were stored (re-ingest it)"
     )
     relation: str | None = Field(
         None, description="the verified variant relation of the query to this model, when there is one"

@@ -51,12 +51,15 @@ class LocalSignature:
     area   : (p,) float32, share of the shape's area each sample stands for (sum 1)
     valid  : (p,) int16, how many leading slopes of each sample the rim leaves trusted (J' if no rim)
     rim    : float, length of the free boundary over √area (0 for a closed surface)
+    vertex : (p,) int32, the vertex each sample is, in the described mesh (the description's vertices,
+             which the explain view draws); None in descriptions saved before it was stored
     """
 
     slopes: np.ndarray
     area: np.ndarray
     valid: np.ndarray
     rim: float
+    vertex: np.ndarray | None = None
 
 
 def log_slopes(spectrum: Spectrum, times: np.ndarray) -> np.ndarray:
@@ -141,4 +144,4 @@ def local_signature(spectrum: Spectrum, vertices: np.ndarray, faces: np.ndarray,
     return LocalSignature(slopes=slopes[keep].astype(np.float32),
                           area=(area / area.sum()).astype(np.float32),
                           valid=valid_n[keep].astype(np.int16),
-                          rim=rim_length(vertices, faces, rim))
+                          rim=rim_length(vertices, faces, rim), vertex=keep.astype(np.int32))

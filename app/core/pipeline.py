@@ -158,6 +158,8 @@ class ShapeDescription:
         if self.local is not None:
             local = {"local_slopes": self.local.slopes, "local_area": self.local.area,
                      "local_valid": self.local.valid, "local_rim": np.asarray(self.local.rim)}
+            if self.local.vertex is not None:
+                local["local_vertex"] = self.local.vertex
         with open(path, "wb") as fh:
             np.savez_compressed(
                 fh, hks_packed=pack_float32(self.hks), hks_shape=np.asarray(self.hks.shape, dtype=np.int64),
@@ -193,8 +195,9 @@ def load_local(path: str | Path) -> LocalSignature | None:
 def _local(z: np.lib.npyio.NpzFile) -> LocalSignature | None:
     if "local_slopes" not in z.files:
         return None
+    vertex = z["local_vertex"] if "local_vertex" in z.files else None  # stored since the matched region
     return LocalSignature(slopes=z["local_slopes"], area=z["local_area"], valid=z["local_valid"],
-                          rim=float(z["local_rim"]))
+                          rim=float(z["local_rim"]), vertex=vertex)
 
 
 def canonical_mesh(mesh: Mesh, params: DescribeParams) -> Mesh:

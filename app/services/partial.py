@@ -6,10 +6,13 @@ of the global index and the COARSE_KEEP nearest by a coarse partial distance (th
 COARSE_POINTS samples) among the COARSE_SCAN nearest of the global index: the global ranking is what a
 piece defeats, and it left the piece's class out of its top 200 for 8 % of SHREC'11's 60-85 % pieces,
 the coarse pass for 1 % (docs/partial.md). The candidates are re-ranked by the local signatures'
-distance (app.core.partial_match). A closed query keeps the global ranking exactly. Every hit gets
+score (app.core.partial_match: the distance less the weight of the share matched one to one). A
+closed query keeps the global ranking exactly. Every hit gets
 forward and reverse scores either way.
 Models described before the local signature existed (description format < 3) have none: they get no
 scores and, in a re-ranking, follow the models that have one, in their global order.
+The hits a piece's search returns (at most search.MAX_K) also get their matched region: the model
+samples the query matched, which the page's 3D view colours.
 """
 
 from __future__ import annotations
@@ -21,7 +24,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from app.core.partial import LocalSignature
-from app.core.partial_match import PartialMatch, head, match_many
+from app.core.partial_match import PartialMatch, Region, head, match_many
+from app.core.partial_match import regions as regions_of
 from app.core.pipeline import LOCAL, load_local
 from app.services.context import ServiceContext
 
@@ -87,9 +91,9 @@ def is_partial(query: LocalSignature | None, requested: bool | None) -> bool:
 
 
 def _matches(ctx: ServiceContext, query: LocalSignature, model_ids: Sequence[int],
-             budget_s: float) -> list[PartialMatch | None]:
+             budget_s: float, mutual: bool = False) -> list[PartialMatch | None]:
     """One PartialMatch per model (None: no signature, or not reached within budget_s; the first
-    CHUNK are always scored)."""
+    CHUNK are always scored). mutual: with the mutual share, which the re-ranking's score reads."""
     out: list[PartialMatch | None] = [None] * len(model_ids)
     deadline = time.monotonic() + budget_s
     for start in range(0, len(model_ids), CHUNK):
@@ -98,7 +102,8 @@ def _matches(ctx: ServiceContext, query: LocalSignature, model_ids: Sequence[int
         chunk = range(start, min(start + CHUNK, len(model_ids)))
         signed = [(j, _CACHE.get(ctx.blobs.description_path(model_ids[j]))) for j in chunk]
         have = [(j, sig) for j, sig in signed if sig is not None]
-        for (j, _), m in zip(have, match_many(query, [sig for _, sig in have], LOCAL), strict=True):
+        found = match_many(query, [sig for _, sig in have], LOCAL, mutual=mutual)
+        for (j, _), m in zip(have, found, strict=True):
             out[j] = m
     return out
 
@@ -121,4 +126,19 @@ def score(ctx: ServiceContext, query: LocalSignature | None,
     SCORE_BUDGET_S)."""
     if query is None:
         return [None] * len(model_ids)
-    return _matches(ctx, query, model_ids, SCORE_BUDGET_S)
+    return _matches(ctx, query, model_ids, SCORE_BUDGET_S, mutual=True)
+
+
+def regions(ctx: ServiceContext, query: LocalSignature | None, model_ids: Sequence[int],
+            found: Sequence[PartialMatch | None]) -> list[Region | None]:
+    """Where the query matched in each model (found: its PartialMatch, None: unscored): the k hits of a
+    page, their signatures read from the cache the scoring filled, about a sixth of a match each."""
+    out: list[Region | None] = [None] * len(model_ids)
+    if query is None:
+        return out
+    have = [(j, sig, m.shift) for j, (model_id, m) in enumerate(zip(model_ids, found, strict=True))
+            if m is not None and (sig := _CACHE.get(ctx.blobs.description_path(model_id))) is not None]
+    got = regions_of(query, [sig for _, sig, _ in have], [shift for _, _, shift in have], LOCAL)
+    for (j, _, _), r in zip(have, got, strict=True):
+        out[j] = r
+    return out

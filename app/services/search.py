@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from app.core.partial_match import Region
 from app.core.pipeline import ShapeDescription
 from app.services import fusion_rerank
 from app.services import partial as partial_mod
@@ -29,6 +30,7 @@ class Hit:
     reverse: float | None = None  # share of the model the query covers
     partial: bool = False  # ranked by the partial re-ranking
     rerank: float | None = None  # the distance the hits are ordered by (services/fusion_rerank)
+    region: Region | None = None  # a piece's: where it matched in the model (app.core.partial_match)
 
 
 @dataclass(frozen=True)
@@ -103,20 +105,22 @@ def search_description(
 def _scored(ctx: ServiceContext, description: ShapeDescription, hits: list[Hit], k: int,
             piece: bool) -> list[Hit]:
     """The first k hits with their forward / reverse scores; a piece's candidates (app.services.partial)
-    ordered by partial distance (models without a local signature after, in their global order)."""
+    ordered by partial score (models without a local signature after, in their global order)."""
     if piece:  # the candidates include the global GLOBAL_KEEP >= k nearest: no other hit is needed
         hits = [hits[j] for j in partial_mod.candidates(ctx, description.local, [h.model.id for h in hits])]
     else:
         hits = hits[:k]
     found = partial_mod.score(ctx, description.local, [h.model.id for h in hits])
     if piece:
-        rank_of = [m.distance if m is not None else float("inf") for m in found]
+        rank_of = [m.score if m is not None else float("inf") for m in found]
         order = sorted(range(len(hits)), key=lambda j: (rank_of[j], j))
         hits, found = [hits[j] for j in order[:k]], [found[j] for j in order[:k]]
+    ids = [h.model.id for h in hits]
+    where = partial_mod.regions(ctx, description.local, ids, found) if piece else [None] * len(hits)
     return [
         replace(h, rank=rank, forward=m.forward if m else None, reverse=m.reverse if m else None,
-                partial=piece)
-        for rank, (h, m) in enumerate(zip(hits, found, strict=True), start=1)
+                partial=piece, region=r)
+        for rank, (h, m, r) in enumerate(zip(hits, found, where, strict=True), start=1)
     ]
 
 

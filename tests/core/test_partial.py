@@ -19,7 +19,7 @@ from app.core.partial import (
     rim_distance,
     rim_length,
 )
-from app.core.partial_match import CAP, match_many
+from app.core.partial_match import CAP, MUTUAL, head, match_many, mutual_shares, region, regions
 from app.core.resolution import normalize_scale
 from app.core.spectrum import Spectrum, smallest_eigenpairs
 
@@ -192,3 +192,87 @@ def test_an_unmatched_part_of_the_query_costs_its_area_times_the_cap():
         assert m.distance == pytest.approx(0.3 * CAP)
         assert m.forward == pytest.approx(0.7) and m.scale == pytest.approx(1.0)
         assert m.reverse == pytest.approx(0.7)
+
+
+def test_the_region_is_where_the_query_matched_and_sums_to_forward():
+    """By hand: the query's first sample (area 0.7) equals the model's first, its second matches
+    nothing; the region puts 0.7 on the model's first sample's vertex and nothing elsewhere."""
+    width = PARAMS.slopes + PARAMS.shifts - 1
+    model = LocalSignature(slopes=np.array([[0.0] * width, [-1.0] * width, [0.01] * width], np.float32),
+                           area=np.full(3, 1 / 3, np.float32), valid=np.array([width, width, 2], np.int16),
+                           rim=0.0, vertex=np.array([10, 20, 30], np.int32))
+    query = LocalSignature(slopes=np.array([[0.0] * width, [5.0] * width], np.float32),
+                           area=np.array([0.7, 0.3], np.float32), valid=np.array([width, width], np.int16),
+                           rim=1.0)
+    (m,) = match_many(query, [model], PARAMS)
+    got = region(query, model, m.shift, PARAMS)
+    assert got is not None
+    assert got.vertex.tolist() == [10, 20, 30]
+    # the third model sample is nearer but sits on the rim (2 trusted slopes): never compared
+    assert got.weight == pytest.approx([0.7, 0.0, 0.0])
+    assert got.weight.sum() == pytest.approx(m.forward)
+    assert region(query, LocalSignature(model.slopes, model.area, model.valid, 0.0), 0, PARAMS) is None
+
+
+def test_a_pieces_region_sums_to_its_forward_score():
+    """A capsule's upper part against the whole: the matched model samples' weights sum to forward
+    (the same nearest samples at the winning scale), on the model's own sample vertices. Where the
+    region lies is tested on an articulated body through the API (tests/api/test_partial_api.py)."""
+    whole = trimesh.creation.capsule(height=3.0, radius=0.5, count=[24, 24])
+    keep = whole.triangles_center[:, 2] > -0.4
+    piece_t = trimesh.Trimesh(whole.vertices, whole.faces[keep], process=True)
+    model_mesh = unit_mesh(whole)
+    m_spec, m_mass = spectrum_of(model_mesh)
+    model = local_signature(m_spec, model_mesh.vertices, model_mesh.faces, m_mass,
+                            np.zeros(model_mesh.n_vertices, bool), PARAMS)
+    assert model.vertex is not None
+    assert model.vertex.tolist() == farthest_points(model_mesh.vertices, 64).tolist()
+    piece = unit_mesh(piece_t)
+    p_spec, p_mass = spectrum_of(piece)
+    query = local_signature(p_spec, piece.vertices, piece.faces, p_mass,
+                            free_boundary(piece.faces, piece.n_vertices), PARAMS)
+    (m,) = match_many(query, [model], PARAMS)
+    got = region(query, model, m.shift, PARAMS)
+    assert got is not None and m.forward > 0.05
+    assert got.weight.sum() == pytest.approx(m.forward)
+    # under another scale hypothesis the region is another one, and sums to that hypothesis's forward
+    other = region(query, model, (m.shift + 3) % PARAMS.shifts, PARAMS)
+    assert other is not None and not np.array_equal(other.weight, got.weight)
+    # the batched form (a page's hits, grouped by shift into one product) gives each model's region as
+    # region() alone does: two models share a product here, one has no vertices, one is on its own
+    fewer = head(model, 40)
+    bare = LocalSignature(model.slopes, model.area, model.valid, 0.0)
+    other = (m.shift + 3) % PARAMS.shifts
+    models, shifts = [model, fewer, bare, model], [m.shift, m.shift, m.shift, other]
+    batched = regions(query, models, shifts, PARAMS)
+    assert batched[2] is None
+    for i in (0, 1, 3):
+        alone = regions(query, [models[i]], [shifts[i]], PARAMS)[0]
+        assert batched[i] is not None and alone is not None
+        assert np.array_equal(batched[i].weight, alone.weight)
+        assert batched[i].vertex.tolist() == models[i].vertex.tolist()
+    coarse = head(model, 8)
+    assert coarse.vertex is not None and coarse.vertex.tolist() == model.vertex[:8].tolist()
+
+
+def test_the_mutual_share_counts_one_to_one_matches_and_lowers_the_score():
+    """By hand: query samples q0 (area 0.7, equal to model sample m0) and q1 (0.3, far from both). Both
+    have m0 as nearest; m0's nearest query sample is q0, m1's is q0 too (1 against 36): only q0's match
+    is one to one, so the mutual share is 0.7 and the score 0.3 CAP - MUTUAL x CAP x 0.7."""
+    width = PARAMS.slopes + PARAMS.shifts - 1
+    model = LocalSignature(slopes=np.array([[0.0] * width, [-1.0] * width], np.float32),
+                           area=np.array([0.5, 0.5], np.float32), valid=np.array([width, width], np.int16),
+                           rim=0.0)
+    query = LocalSignature(slopes=np.array([[0.0] * width, [5.0] * width], np.float32),
+                           area=np.array([0.7, 0.3], np.float32), valid=np.array([width, width], np.int16),
+                           rim=1.0)
+    (plain,) = match_many(query, [model], PARAMS)
+    (m,) = match_many(query, [model], PARAMS, mutual=True)
+    assert plain.mutual == 0.0 and plain.score == plain.distance  # not asked: the distance alone
+    assert m.mutual == pytest.approx(0.7)
+    assert m.score == pytest.approx(0.3 * CAP - MUTUAL * CAP * 0.7)
+    assert (m.distance, m.forward, m.reverse) == (plain.distance, plain.forward, plain.reverse)
+    # a model that also has a look-alike of q1 (m2, nearer to q1 than to q0): both match one to one
+    twice = LocalSignature(slopes=np.array([[0.0] * width, [0.0] * width, [4.0] * width], np.float32),
+                           area=np.full(3, 1 / 3, np.float32), valid=np.full(3, width, np.int16), rim=0.0)
+    assert mutual_shares(query, [twice, model], [0, 0], PARAMS) == pytest.approx([1.0, 0.7])

@@ -250,7 +250,8 @@ def same_local(a: ShapeDescription, b: ShapeDescription) -> bool:
     if a.local is None or b.local is None:
         return a.local is b.local
     return (np.array_equal(a.local.slopes, b.local.slopes) and np.array_equal(a.local.area, b.local.area)
-            and np.array_equal(a.local.valid, b.local.valid) and a.local.rim == b.local.rim)
+            and np.array_equal(a.local.valid, b.local.valid) and a.local.rim == b.local.rim
+            and np.array_equal(a.local.vertex, b.local.vertex))
 
 
 # --- parameters -------------------------------------------------------------------------------------
@@ -430,7 +431,7 @@ def test_a_description_round_trips_through_npz_bit_for_bit(tmp_path):
     with np.load(tmp_path / "d.npz") as z:
         assert sorted(z.files) == [
             "eigenvalues", "format", "hks_packed", "hks_shape", "input_vertices", "keypoints",
-            "local_area", "local_rim", "local_slopes", "local_valid", "weights"
+            "local_area", "local_rim", "local_slopes", "local_valid", "local_vertex", "weights"
         ]
         assert int(z["format"]) == DESCRIPTION_FORMAT == 3
 

@@ -17,7 +17,8 @@ def scored(monkeypatch):
     calls: list[int] = []
     monkeypatch.setattr(partial._CACHE, "get", lambda path: None if path == "no-sig-7" else f"sig-{path}")
 
-    def fake_match(query, models, params):
+    def fake_match(query, models, params, mutual=False):
+        assert mutual  # the full scoring computes the mutual share its ranking reads
         calls.append(len(models))
         return [f"match-{m}" for m in models]
 
@@ -55,7 +56,8 @@ def test_candidates_are_the_global_head_and_the_coarse_nearest_in_global_order(m
     heads: list[int] = []
     monkeypatch.setattr(partial._CACHE, "get", lambda path: path)
 
-    def fake_match(query, models, params):
+    def fake_match(query, models, params, mutual=False):
+        assert not mutual  # the coarse pass ranks by the distance: no extra product
         heads.append(len(query.slopes))
         return [SimpleNamespace(distance=float(-m)) for m in models]  # model id m: larger is nearer
 

@@ -15,6 +15,7 @@ from app.api.deps import CtxDep, DeleteDep, RuntimeDep, UploadDep
 from app.api.limits import IdPath
 from app.api.schemas import (
     ErrorResponse,
+    MatchedRegion,
     ModelAccepted,
     ModelCreate,
     ModelPublic,
@@ -24,6 +25,7 @@ from app.api.schemas import (
 )
 from app.api.space import RoomDep
 from app.api.uploads import multipart_body, read_form
+from app.core.partial_match import Region
 from app.services import catalog, ingestion, metadata, rendering, search, variants, views
 from app.services.errors import InvalidInputError, NotFoundError
 
@@ -173,6 +175,13 @@ def _header_text(text: str) -> str:
     return "".join(c if 32 <= ord(c) < 127 else "?" for c in text)[:300]
 
 
+def _region(region: Region | None) -> MatchedRegion | None:
+    if region is None:
+        return None
+    weights = [round(float(w), 5) for w in region.weight]  # 5 digits: a page of 100 hits stays small
+    return MatchedRegion(vertices=[int(v) for v in region.vertex], weights=weights)
+
+
 def to_response(
     result: search.SearchResult,
     relations: dict[int, str] | None = None,
@@ -185,7 +194,7 @@ def to_response(
         SearchHit(
             model_id=h.model.id, name=h.model.name, label=h.model.label, distance=h.distance, rank=h.rank,
             rerank_distance=h.rerank, forward=h.forward, reverse=h.reverse, partial=h.partial,
-            relation=relations.get(h.model.id), evidence=evidence.get(h.model.id),
+            region=_region(h.region), relation=relations.get(h.model.id), evidence=evidence.get(h.model.id),
         )
         for h in result.hits
     ]

@@ -69,6 +69,14 @@ function labelChip(label) {
   return label ? el("span", { class: "chip" }, label) : el("span", { class: "chip none" }, "unlabelled");
 }
 
+// a piece's two scores (partial matching): how much of the query is in the model, how much of the model it covers
+function shares(hit) {
+  if (!hit.partial || hit.forward === null || hit.forward === undefined) return null;
+  const pct = (x) => `${Math.round(100 * x)} %`;
+  return el("div", { class: "shares", title: "partial match: the share of the query found in this model, and the share of this model the query covers" },
+    el("span", { class: "forward" }, `found ${pct(hit.forward)}`), " · ", el("span", { class: "reverse" }, `covers ${pct(hit.reverse)}`));
+}
+
 // ---- results (Figure 1 layout: query card, then the ranked hits) -------------------------------------
 function renderResults(container, query, response) {
   container.replaceChildren();
@@ -106,6 +114,7 @@ function renderResults(container, query, response) {
         el("div", { class: "name", title: hit.name }, hit.name),
         labelChip(hit.label),
         el("div", { class: "row" }, el("span", { class: "distance" }, `L1 ${hit.distance.toFixed(3)}`), neighbours),
+        shares(hit),
       ),
     );
   });
@@ -143,7 +152,7 @@ async function openCompare(container, query, hit) {
       explanation = await api("/explain", { method: "POST", body: form });
     }
     const viewer = await import("/static/viewer.js");
-    state.disposeCompare = viewer.renderCompare(out, explanation);
+    state.disposeCompare = viewer.renderCompare(out, explanation, hit);
     out.scrollIntoView({ block: "start" });
   } catch (err) {
     out.replaceChildren();

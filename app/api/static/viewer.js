@@ -1,11 +1,14 @@
 // shapebag 3D viewer and "why it matched": two shapes side by side (orbit, zoom), coloured by their
 // visual words (the same colour for the same word on both), keypoints marked, the two BoF histograms and
 // the words that contribute most to their L1 distance. Data: GET /models/{id}/explain?against= or
-// POST /explain. three.js is vendored (/static/vendor/three.min.js, app/api/static/vendor/update.sh).
+// POST /explain. For a piece's hit, the search hit's `region` (the model's samples the piece matched)
+// colours the hit: each vertex takes the weight of its nearest sample, as each sample stands for the
+// surface nearest to it. three.js is vendored (/static/vendor/three.min.js, app/api/static/vendor/update.sh).
 import * as THREE from "/static/vendor/three.min.js";
 
 const PLAIN = [0.56, 0.66, 0.8]; // the thumbnails' steel blue
 const KEYPOINT = 0xd7263d;
+const MATCHED = [0.95, 0.38, 0.04];  // orange, far from the steel blue
 const SVG = "http://www.w3.org/2000/svg";
 
 // one colour per word, far apart for neighbouring ids (golden-ratio hues), the same on every shape
@@ -37,9 +40,37 @@ function shapeGeometry(shape) {
   return geometry;
 }
 
+// (n,) per vertex the weight of its nearest region sample, over the largest: 0 where nothing matched
+export function regionWeights(vertices, region) {
+  const n = vertices.length / 3;
+  const out = new Float32Array(n);
+  const peak = Math.max(...region.weights, 0);
+  if (!(peak > 0)) return out;
+  const samples = region.vertices.filter((v) => v < n);
+  for (let i = 0; i < n; i++) {
+    let best = Infinity;
+    let weight = 0;
+    for (let s = 0; s < samples.length; s++) {
+      const v = samples[s];
+      const dx = vertices[3 * i] - vertices[3 * v];
+      const dy = vertices[3 * i + 1] - vertices[3 * v + 1];
+      const dz = vertices[3 * i + 2] - vertices[3 * v + 2];
+      const d = dx * dx + dy * dy + dz * dz;
+      if (d < best) { best = d; weight = region.weights[s]; }
+    }
+    // a matched sample shows at least 3/4 strength: the colour says where, the shade how much
+    out[i] = weight > 0 ? 0.75 + 0.25 * (weight / peak) : 0;
+  }
+  return out;
+}
+
 function paint(geometry, shape, mode) {
   const colours = geometry.getAttribute("color");
-  shape.words.forEach((word, i) => colours.setXYZ(i, ...(mode === "words" ? wordColour(word) : PLAIN)));
+  if (mode === "region" && shape.region) {
+    shape.region.forEach((w, i) => colours.setXYZ(i, ...PLAIN.map((c, j) => c + w * (MATCHED[j] - c))));
+  } else {
+    shape.words.forEach((word, i) => colours.setXYZ(i, ...(mode === "words" ? wordColour(word) : PLAIN)));
+  }
   colours.needsUpdate = true;
 }
 
@@ -181,23 +212,32 @@ function panel(shape, role) {
     el("div", { class: "view-foot" }, `${shape.words.length} vertices · ${shape.keypoints.length} keypoints`)) };
 }
 
-// Render the comparison into `container`; returns a dispose function.
-export function renderCompare(container, e) {
+// Render the comparison into `container`; returns a dispose function. hit: the search hit (its
+// partial scores and matched region, when the query was a piece), or nothing.
+export function renderCompare(container, e, hit = null) {
   const left = panel(e.shape, "query");
   const right = panel(e.against, "hit");
-  const mode = el("select", { class: "mode", "aria-label": "colouring" },
-    el("option", { value: "words" }, "coloured by visual word"), el("option", { value: "plain" }, "plain"));
+  const region = hit && hit.region ? hit.region : null;
+  if (region) e.against.region = regionWeights(e.against.vertices, region);
+  const options = [el("option", { value: "words" }, "coloured by visual word"), el("option", { value: "plain" }, "plain")];
+  if (region) options.unshift(el("option", { value: "region", selected: "" }, "the region that matched"));
+  const mode = el("select", { class: "mode", "aria-label": "colouring" }, ...options);
   const keypoints = el("input", { type: "checkbox", checked: "" });
   const fused = Math.abs(e.distance - e.bof_l1) > 5e-4;  // the index also compares the Shape-DNA spectrum
   const summary = el("p", { class: "why" },
     `L1 distance between the Bag-of-Features histograms: ${e.bof_l1.toFixed(3)} over ${e.words} words`,
     fused ? ` (the ranked distance, BoF fused with the Shape-DNA spectrum, is ${e.distance.toFixed(3)}). ` : ". ",
     "The words in the table make up most of it; the same colour is the same word on both shapes, red dots are keypoints.");
+  const pct = (x) => `${Math.round(100 * x)} %`;
+  const partial = region ? el("p", { class: "why partial-why" },
+    el("span", { class: "swatch matched" }), ` The query is a piece: ${pct(hit.forward)} of its surface is found in “${e.against.name}”,`,
+    ` which it covers ${pct(hit.reverse)} of. Orange on the hit: where the query's surface matched (deeper: more of it);`,
+    " a part repeated on the model (both legs, both arms) can light up for one part of the query.") : null;
   const views = el("div", { class: "views" }, left.node, right.node);
   container.replaceChildren(
     el("div", { class: "compare-head" }, el("h3", {}, `Why “${e.against.name}” matched`),
       el("label", {}, mode), el("label", {}, keypoints, " keypoints")),
-    views, summary,
+    views, partial, summary,
     el("div", { class: "explain-row" }, el("div", { class: "chart" }, histogram(e),
       el("div", { class: "legend" }, "left bar: query · right bar: hit · outlined: the words that differ most")), topWords(e)),
   );
@@ -206,6 +246,7 @@ export function renderCompare(container, e) {
     return () => {};
   }
   const shown = [new ShapeView(left.host, e.shape), new ShapeView(right.host, e.against)];
+  if (region) shown.forEach((v) => v.setMode(mode.value));
   mode.addEventListener("change", () => shown.forEach((v) => v.setMode(mode.value)));
   keypoints.addEventListener("change", () => shown.forEach((v) => v.showKeypoints(keypoints.checked)));
   return () => shown.forEach((v) => v.dispose());
