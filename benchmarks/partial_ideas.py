@@ -28,17 +28,15 @@ from pathlib import Path
 
 import numpy as np
 
-from app.core import hks as hks_mod
-from app.core.partial import LocalSignature, local_signature
+from app.core.partial import LocalSignature
 from app.core.partial_match import CAP, MIN_SLOPES, TOLERANCE, head
-from app.core.pipeline import LOCAL, DescribeParams, ShapeDescription
-from app.core.spectrum import Spectrum
+from app.core.pipeline import LOCAL
 from app.core.vocabulary import Vocabulary
 from app.datasets.folder import read_labelled_folder
 from app.services.partial import COARSE_KEEP, COARSE_POINTS, GLOBAL_KEEP
 from benchmarks.partial_offline import pairs, served
 from benchmarks.partial_rerank import VOCABULARY, average_precision
-from benchmarks.partial_spectra import _folder, _key
+from benchmarks.partial_spectra import _folder, _key, load_with_spectrum
 
 FAR = np.float32(1e30)
 
@@ -51,18 +49,12 @@ class Shape:
 
 
 def load(path: Path, vocab: Vocabulary) -> Shape:
-    """partial_spectra._load, plus the samples' levels."""
-    z = np.load(path)
-    spectrum = Spectrum(z["vals"], z["vecs"].astype(np.float64))
-    times = hks_mod.time_scales(spectrum.eigenvalues, DescribeParams().m, DescribeParams().time_range)
-    h = hks_mod.normalize(hks_mod.heat_kernel_signature(spectrum, times))
-    desc = ShapeDescription(hks=h.astype(np.float32), weights=z["mass"], keypoints=np.zeros(len(h), bool),
-                            eigenvalues=spectrum.eigenvalues, input_vertices=0)
-    sig = local_signature(spectrum, z["verts"], z["faces"], z["mass"], z["rim"], LOCAL)
+    """partial_spectra's entry, plus the samples' levels."""
+    vec, sig, spectrum = load_with_spectrum(path, vocab, LOCAL)
     assert sig.vertex is not None
     grid = LOCAL.times(LOCAL.shifts - 1)
     k = (spectrum.eigenvectors[sig.vertex] ** 2) @ np.exp(-np.outer(spectrum.eigenvalues, grid))
-    return Shape(vocab.encode(desc).astype(np.float64), sig, np.log(np.maximum(k, 1e-300) * grid))
+    return Shape(vec, sig, np.log(np.maximum(k, 1e-300) * grid))
 
 
 @dataclass

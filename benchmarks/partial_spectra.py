@@ -80,6 +80,13 @@ def cache(folders: list[Path], out: Path, workers: int, every: int = 1,
 
 
 def _load(path: Path, vocab: Vocabulary, params: LocalParams) -> tuple[np.ndarray, LocalSignature]:
+    vec, local, _ = load_with_spectrum(path, vocab, params)
+    return vec, local
+
+
+def load_with_spectrum(path: Path, vocab: Vocabulary,
+                       params: LocalParams) -> tuple[np.ndarray, LocalSignature, Spectrum]:
+    """A cached entry -> (fused global vector (v,), local signature, its spectrum)."""
     z = np.load(path)
     spectrum = Spectrum(z["vals"], z["vecs"].astype(np.float64))
     times = hks_mod.time_scales(spectrum.eigenvalues, DescribeParams().m, DescribeParams().time_range)
@@ -87,7 +94,7 @@ def _load(path: Path, vocab: Vocabulary, params: LocalParams) -> tuple[np.ndarra
     desc = ShapeDescription(hks=h.astype(np.float32), weights=z["mass"], keypoints=np.zeros(len(h), bool),
                             eigenvalues=spectrum.eigenvalues, input_vertices=0)
     local = local_signature(spectrum, z["verts"], z["faces"], z["mass"], z["rim"], params)
-    return vocab.encode(desc).astype(np.float64), local
+    return vocab.encode(desc).astype(np.float64), local, spectrum
 
 
 def score(src: Path, queries: Path, out: Path, reranks: list[int], classes: set[str] | None,
