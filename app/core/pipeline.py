@@ -239,12 +239,10 @@ def describe_filters(
 
 
 def describe_canonical(fine: Mesh, input_vertices: int, params: DescribeParams,
-                       rim: np.ndarray | None = None) -> ShapeDescription:
-    """describe(mesh, params) from canonical_with_rim(mesh, params), for a caller that needs both (the
-    explain view): the mesh is resampled once. Without `rim`, the open boundary of `fine` (the caps of
-    closed holes then count as surface)."""
-    if rim is None:
-        rim = _rim_mask(fine.faces, fine.n_vertices, fine.n_vertices)
+                       rim: np.ndarray) -> ShapeDescription:
+    """describe(mesh, params) from (fine, rim) = canonical_with_rim(mesh, params), for a caller that
+    needs both (the explain view): the mesh is resampled once. The rim is required: `fine` has its
+    small holes capped, and only canonical_with_rim knows where the caps are."""
     return _from_canonical(fine, rim, input_vertices, params, [params.keypoint_filter], _Clock())[0]
 
 

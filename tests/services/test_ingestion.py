@@ -401,7 +401,7 @@ def test_a_stored_description_has_the_rim_of_the_same_mesh_described_as_a_query(
     import trimesh
 
     from app.core.meshdata import Mesh
-    from app.core.pipeline import DescribeParams, canonical_mesh, describe, describe_canonical
+    from app.core.pipeline import DescribeParams, _rim_mask, canonical_mesh, describe, describe_canonical
 
     sphere = trimesh.creation.icosphere(subdivisions=4)
     keep = np.flatnonzero(np.linalg.norm(sphere.triangles_center - [0, 0, 1], axis=1) > 0.1)
@@ -415,5 +415,6 @@ def test_a_stored_description_has_the_rim_of_the_same_mesh_described_as_a_query(
     np.testing.assert_array_equal(got.local.valid, want.local.valid)
     np.testing.assert_allclose(got.local.slopes, want.local.slopes, rtol=1e-5, atol=1e-6)
     assert fine.n_vertices == canonical_mesh(mesh, params).n_vertices
-    # what the ingest stored before: the capped mesh described as if it were closed
-    assert describe_canonical(fine, mesh.n_vertices, params).local.rim == 0.0
+    # what the ingest stored before: the capped mesh described as if it were closed (its own open boundary)
+    as_closed = _rim_mask(fine.faces, fine.n_vertices, fine.n_vertices)
+    assert describe_canonical(fine, mesh.n_vertices, params, as_closed).local.rim == 0.0
