@@ -100,7 +100,7 @@ def _matches(ctx: ServiceContext, query: LocalSignature, model_ids: Sequence[int
         if start and time.monotonic() > deadline:
             break  # the rest unscored: the first chunk always is, so a query never gets nothing
         chunk = range(start, min(start + CHUNK, len(model_ids)))
-        signed = [(j, _CACHE.get(ctx.blobs.description_path(model_ids[j]))) for j in chunk]
+        signed = [(j, local_of(ctx, model_ids[j])) for j in chunk]
         have = [(j, sig) for j, sig in signed if sig is not None]
         found = match_many(query, [sig for _, sig in have], LOCAL, mutual=mutual)
         for (j, _), m in zip(have, found, strict=True):
@@ -137,7 +137,7 @@ def regions(ctx: ServiceContext, query: LocalSignature | None, model_ids: Sequen
     if query is None:
         return out
     have = [(j, sig, m.shift) for j, (model_id, m) in enumerate(zip(model_ids, found, strict=True))
-            if m is not None and (sig := _CACHE.get(ctx.blobs.description_path(model_id))) is not None]
+            if m is not None and (sig := local_of(ctx, model_id)) is not None]
     got = regions_of(query, [sig for _, sig, _ in have], [shift for _, _, shift in have], LOCAL)
     for (j, _, _), r in zip(have, got, strict=True):
         out[j] = r
