@@ -31,9 +31,10 @@ import numpy as np
 from app.core import fusion
 from app.core.baselines import euclidean_distance, shape_dna
 from app.core.pipeline import DescribeParams, ShapeDescription
+from app.core.roughness import displacement_correlation
 from app.core.vocabulary import EncodeParams, Vocabulary, l1_distance
 from app.evaluation import adaptive, sets
-from app.evaluation.cache import DescriptionCache, Variant
+from app.evaluation.cache import DescriptionCache, Variant, load_variant
 
 SHREC = "shrec11-simplified"
 
@@ -60,6 +61,7 @@ class Column:
     db_dna: np.ndarray  # (N, c) raw Shape-DNA (the evaluate line's L2)
     query_dna: np.ndarray  # (q, c)
     query_rims: np.ndarray  # (q,) free boundary over √area (NaN: no local signature)
+    query_noises: np.ndarray  # (q,) input displacement correlation (measured from the mesh if not stored)
 
 
 def _load(folder: sets.Folder, cache: Path, variant: Variant, vocab: Vocabulary) -> tuple | None:
@@ -70,7 +72,11 @@ def _load(folder: sets.Folder, cache: Path, variant: Variant, vocab: Vocabulary)
         return None
     descs = [ShapeDescription.load(p) for p in paths]
     fused = np.stack([vocab.encode(d, EncodeParams()) for d in descs])
-    return fused, np.stack([shape_dna(d.eigenvalues) for d in descs]), adaptive.rims_of(descs)
+    noises = adaptive.noises_of(descs)
+    for i in np.flatnonzero(np.isnan(noises)):  # saved before descriptions recorded it: the same measure
+        path, sha = folder.files[i]
+        noises[i] = displacement_correlation(load_variant(str(path), sha, variant))
+    return fused, np.stack([shape_dna(d.eigenvalues) for d in descs]), adaptive.rims_of(descs), noises
 
 
 def load_column(spec: str, cache: Path, vocab: Vocabulary) -> Column | None:
@@ -87,11 +93,11 @@ def load_column(spec: str, cache: Path, vocab: Vocabulary) -> Column | None:
         if q is None:
             return None
         pairs = sets.counterparts(folder, other)
-        return Column(spec, folder.labels, other.labels, pairs, base[0], q[0], base[1], q[1], q[2])
+        return Column(spec, folder.labels, other.labels, pairs, base[0], q[0], base[1], q[1], q[2], q[3])
     q = _load(folder, cache, Variant(float(noise), 0), vocab) if noise else base
     if q is None:
         return None
-    return Column(spec, folder.labels, folder.labels, np.arange(n), base[0], q[0], base[1], q[1], q[2])
+    return Column(spec, folder.labels, folder.labels, np.arange(n), base[0], q[0], base[1], q[1], q[2], q[3])
 
 
 def scores(distances: np.ndarray, col: Column) -> tuple[float, float]:
@@ -116,7 +122,7 @@ def served_adaptive(
 ) -> np.ndarray:
     """(q, N) as served (app.evaluation.adaptive: brute-force L1 for the index)."""
     return _masked(adaptive.ranks(col.queries, col.db, col.left_out, words, stored, rule, n_cand,
-                                  col.query_rims), col)
+                                  col.query_rims, col.query_noises), col)
 
 
 def full_adaptive(col: Column, words: int, stored: float, rule: fusion.AdaptiveRule) -> np.ndarray:
@@ -124,7 +130,8 @@ def full_adaptive(col: Column, words: int, stored: float, rule: fusion.AdaptiveR
     out = np.empty((len(col.queries), len(col.db)))
     for i, q in enumerate(col.queries):
         keep = np.setdiff1d(np.arange(len(col.db)), [col.left_out[i]])
-        w, expanded = fusion.adaptive_query(q, col.db[keep], words, stored, rule, float(col.query_rims[i]))
+        w, expanded = fusion.adaptive_query(q, col.db[keep], words, stored, rule, float(col.query_rims[i]),
+                                            float(col.query_noises[i]))
         out[i, keep] = fusion.adaptive_distances(expanded, w, col.db[keep], words, stored)
     return _masked(out, col)
 

@@ -120,6 +120,10 @@ def fuse(bof: np.ndarray, dna: np.ndarray, scales: FusionScales) -> np.ndarray:
 # stops, so only an open query starts from the lower weight. A distinct nearest match (by the index's
 # fused L1, well nearer than the second: Lowe's ratio test) stays first: the expansion reorders a
 # query's class, and must not demote a copy of the query for looking unlike its neighbours.
+# A closed query whose own mesh carries vertex noise (its normal displacements anti-correlated from vertex
+# to vertex, app.core.roughness.displacement_correlation) weighs its Shape-DNA more still: the noise moves
+# the HKS at every vertex, and so the BoF's words, while the first eigenvalues of a closed surface hardly
+# move; the agreement ratio misses it when the noisy BoF lands in one wrong class, not in a scatter.
 
 
 # each of the re-rank's two index searches returns this many (>= the service's largest k, so every answer
@@ -141,6 +145,9 @@ class AdaptiveRule:
                  most this is closed; the same rankings at 0 and 0.05 on every column (docs/results.md)
     distinct   : the index's nearest stays first when its fused L1 is below this share of the second
                  nearest's (0: never); 0.8, 0.9 and 0.95 rank every column alike (docs/results.md)
+    noisy_below : a closed query whose input's displacement correlation is below this is noisy (clean
+                  surfaces 0.6-0.9, vertex noise about -0.5, CAD creases 0.1-0.8: docs/results.md)
+    noisy_weight : the least weight of a noisy closed query
     """
 
     weight: float = 0.4
@@ -151,11 +158,13 @@ class AdaptiveRule:
     closed_weight: float = DEFAULT_WEIGHT
     closed_rim: float = 0.05
     distinct: float = 0.9
+    noisy_below: float = 0.0
+    noisy_weight: float = 4.0
 
     def __post_init__(self) -> None:
         if not (self.weight > 0 and self.pivot > 0 and self.power >= 0 and self.neighbours >= 2
                 and self.expansion >= 0 and self.closed_weight >= 0 and self.closed_rim >= 0
-                and 0 <= self.distinct <= 1):
+                and 0 <= self.distinct <= 1 and -1 <= self.noisy_below <= 1 and self.noisy_weight >= 0):
             raise ValueError(f"invalid adaptive fusion rule: {self}")
 
 
@@ -201,22 +210,31 @@ def is_closed(rim: float | None, rule: AdaptiveRule) -> bool:
     return rim is not None and bool(rim <= rule.closed_rim)
 
 
-def query_weight(r: float, rule: AdaptiveRule, rim: float | None = None) -> float:
-    """w = w0 · max(1, τ / r)^p, at least closed_weight for a closed query: the Shape-DNA's weight."""
+def is_noisy(noise: float | None, rule: AdaptiveRule) -> bool:
+    """Whether an input with this displacement correlation carries vertex noise; unknown is not."""
+    return noise is not None and bool(noise < rule.noisy_below)
+
+
+def query_weight(r: float, rule: AdaptiveRule, rim: float | None = None, noise: float | None = None) -> float:
+    """w = w0 · max(1, τ / r)^p, at least closed_weight for a closed query and noisy_weight for a closed
+    noisy one: the Shape-DNA's weight."""
     w = rule.weight * max(1.0, rule.pivot / r) ** rule.power
-    return max(w, rule.closed_weight) if is_closed(rim, rule) else w
+    if not is_closed(rim, rule):
+        return w
+    return max(w, rule.closed_weight, rule.noisy_weight if is_noisy(noise, rule) else 0.0)
 
 
 def adaptive_query(
     query: np.ndarray, candidates: np.ndarray, words: int, stored_weight: float, rule: AdaptiveRule,
-    rim: float | None = None,
+    rim: float | None = None, noise: float | None = None,
 ) -> tuple[float, np.ndarray]:
     """query (v + c,) fused, candidates (n, v + c) its nearest stored vectors (the query itself
-    excluded), rim the query's (None: unknown) -> (w, expanded query (v + c,) in the same fused layout)."""
+    excluded), rim and noise (displacement correlation) the query's (None: unknown) -> (w, expanded
+    query (v + c,) in the same fused layout)."""
     qb, qd = split_parts(query, words, stored_weight)
     cb, cd = split_parts(candidates, words, stored_weight)
     b, d = _l1(qb, cb), _l1(qd, cd)
-    w = query_weight(agreement(b, d, cb, cd, rule.neighbours), rule, rim)
+    w = query_weight(agreement(b, d, cb, cd, rule.neighbours), rule, rim, noise)
     m = min(rule.expansion, len(b))
     if m == 0:
         return w, np.asarray(query, dtype=np.float32)
@@ -239,6 +257,7 @@ def adaptive_rerank(
     search: Callable[[np.ndarray, int], np.ndarray],
     vectors_of: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
     words: int, stored_weight: float, rule: AdaptiveRule, candidates: int, rim: float | None = None,
+    noise: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The served re-rank: the fused index searched for the query's `candidates` nearest, the weight and
     the expanded query found among them, the index searched again for the expanded query, and the union
@@ -249,12 +268,13 @@ def adaptive_rerank(
                  stored copy left out by the caller when it must be)
     vectors_of : ids (n,) -> (ids kept (n',), their stored fused vectors (n', v + c))
     rim        : the query's free boundary over √area (None: unknown, weighed as open)
+    noise      : the query's input displacement correlation (None: unknown, weighed as clean)
     -> ids (u,) and their distances (u,), ascending (ties in id order) but for a distinct nearest
     match, which comes first with its own distance (distinct_first)."""
     ids, vectors = vectors_of(search(query, candidates))
     if len(ids) == 0:
         return np.zeros(0, np.int64), np.zeros(0)
-    w, expanded = adaptive_query(query, vectors, words, stored_weight, rule, rim)
+    w, expanded = adaptive_query(query, vectors, words, stored_weight, rule, rim, noise)
     union, union_vectors = vectors_of(np.union1d(ids, search(expanded, candidates)))
     dist = adaptive_distances(expanded, w, union_vectors, words, stored_weight)
     order = np.argsort(dist, kind="stable")

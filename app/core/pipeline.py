@@ -23,7 +23,7 @@ from app.core.packing import pack_float32, unpack_float32
 from app.core.partial import LocalParams, LocalSignature, free_boundary, local_signature
 from app.core.remeshing import isotropic_remesh
 from app.core.resolution import SUBDIVISIONS, normalize_scale, to_resolution
-from app.core.roughness import smooth_until
+from app.core.roughness import displacement_correlation, smooth_until
 from app.core.smoothing import WEIGHTS, taubin
 from app.core.spectrum import SpectrumError, smallest_eigenpairs
 
@@ -135,6 +135,8 @@ class ShapeDescription:
     keypoints   : (n,) bool, filtered feature points
     eigenvalues : (k,) float64, of the unit-area mesh (Shape-DNA comes for free)
     input_vertices : vertex count of the mesh as given
+    input_noise : corr(δ, W δ) of the mesh as given (app.core.roughness.displacement_correlation):
+                  negative when its finest scale is vertex noise; NaN when unknown (saved before it)
     seconds     : per-stage wall time
     local       : sampled local signature for partial matching (app.core.partial, on the query grid:
                   a model uses its leading slopes); None in descriptions saved before format 3
@@ -145,6 +147,7 @@ class ShapeDescription:
     keypoints: np.ndarray
     eigenvalues: np.ndarray
     input_vertices: int
+    input_noise: float = float("nan")
     seconds: dict[str, float] = field(default_factory=dict)
     local: LocalSignature | None = None
 
@@ -165,6 +168,7 @@ class ShapeDescription:
                 fh, hks_packed=pack_float32(self.hks), hks_shape=np.asarray(self.hks.shape, dtype=np.int64),
                 weights=self.weights, keypoints=self.keypoints,
                 eigenvalues=self.eigenvalues, input_vertices=np.int64(self.input_vertices),
+                input_noise=np.float64(self.input_noise),
                 format=np.int64(DESCRIPTION_FORMAT), **local,
             )
 
@@ -183,6 +187,7 @@ class ShapeDescription:
             return cls(
                 hks=hks, weights=z["weights"], keypoints=z["keypoints"].astype(bool),
                 eigenvalues=z["eigenvalues"], input_vertices=int(z["input_vertices"]), local=_local(z),
+                input_noise=float(z["input_noise"]) if "input_noise" in z.files else float("nan"),
             )
 
 
@@ -190,6 +195,13 @@ def load_local(path: str | Path) -> LocalSignature | None:
     """The local signature of a saved description (None before format 3), without the HKS table."""
     with np.load(path, allow_pickle=False) as z:
         return _local(z)
+
+
+def load_input_noise(path: str | Path) -> float:
+    """The input displacement correlation of a saved description (NaN: saved before it was recorded),
+    without the HKS table."""
+    with np.load(path, allow_pickle=False) as z:
+        return float(z["input_noise"]) if "input_noise" in z.files else float("nan")
 
 
 def _local(z: np.lib.npyio.NpzFile) -> LocalSignature | None:
@@ -235,19 +247,23 @@ def describe_filters(
     solve is the cost). Description i equals describe(mesh, replace(params, keypoint_filter=filters[i]))."""
     clock = _Clock()
     fine, rim = canonical_with_rim(mesh, params)
-    return _from_canonical(fine, rim, mesh.n_vertices, params, filters, clock)
+    return _from_canonical(mesh, fine, rim, params, filters, clock)
 
 
-def describe_canonical(fine: Mesh, input_vertices: int, params: DescribeParams,
-                       rim: np.ndarray) -> ShapeDescription:
+def describe_canonical(mesh: Mesh, fine: Mesh, rim: np.ndarray, params: DescribeParams) -> ShapeDescription:
     """describe(mesh, params) from (fine, rim) = canonical_with_rim(mesh, params), for a caller that
     needs both (the explain view): the mesh is resampled once. The rim is required: `fine` has its
-    small holes capped, and only canonical_with_rim knows where the caps are."""
-    return _from_canonical(fine, rim, input_vertices, params, [params.keypoint_filter], _Clock())[0]
+    small holes capped, and only canonical_with_rim knows where the caps are; so is the mesh as given,
+    whose vertex count and noise the description records."""
+    return _from_canonical(mesh, fine, rim, params, [params.keypoint_filter], _Clock())[0]
 
 
-def _from_canonical(fine: Mesh, rim: np.ndarray, input_vertices: int, params: DescribeParams,
+def _from_canonical(mesh: Mesh, fine: Mesh, rim: np.ndarray, params: DescribeParams,
                     filters: Sequence[KeypointFilter], clock: _Clock) -> list[ShapeDescription]:
+    input_vertices = mesh.n_vertices
+    # measured on the mesh as given: the canonical resolution's low-pass and decimation hide the noise
+    # that still moves the HKS (the fusion weighs a noisy closed query's Shape-DNA more, app.core.fusion)
+    input_noise = displacement_correlation(mesh)
     # resampling and smoothing are scale-free: one normalisation, after them, gives unit area
     smoothed = smooth(fine, input_vertices, params)
     # remeshing after smoothing: an even sampling of a noisy surface spends its vertices on the
@@ -276,7 +292,8 @@ def _from_canonical(fine: Mesh, rim: np.ndarray, input_vertices: int, params: De
     clock.lap("local")
     return [
         ShapeDescription(hks=hks32, weights=weights, keypoints=mask, eigenvalues=spectrum.eigenvalues,
-                         input_vertices=input_vertices, seconds=dict(clock.laps), local=local)
+                         input_vertices=input_vertices, input_noise=input_noise, seconds=dict(clock.laps),
+                         local=local)
         for mask in masks
     ]
 

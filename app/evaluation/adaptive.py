@@ -19,9 +19,11 @@ CANDIDATES = fusion.RERANK_CANDIDATES  # each of the re-rank's two index searche
 def ranks(
     queries: np.ndarray, db: np.ndarray, left_out: np.ndarray, words: int, stored_weight: float,
     rule: fusion.AdaptiveRule | None = None, candidates: int = CANDIDATES, rims: np.ndarray | None = None,
+    noises: np.ndarray | None = None,
 ) -> np.ndarray:
     """queries (q, v + c), db (N, v + c) fused vectors; left_out (q,) the database index each query must
-    not see (its own or clean copy), or -1; rims (q,) each query's rim (NaN or None: unknown) -> (q, N)
+    not see (its own or clean copy), or -1; rims (q,) each query's rim (NaN or None: unknown), noises (q,)
+    each query's input displacement correlation (NaN or None: unknown) -> (q, N)
     float64 rank of each shape in each query's list (the left-out shape last), usable as a distance
     matrix by app.core.metrics and evaluation.sets."""
     rule = rule or fusion.AdaptiveRule()
@@ -38,8 +40,9 @@ def ranks(
             return near[np.isfinite(d[near])]
 
         rim = None if rims is None else float(rims[i])
+        noise = None if noises is None else float(noises[i])
         ids, _ = fusion.adaptive_rerank(query, search, lambda j: (j, db[j]), words, stored_weight, rule,
-                                        candidates, rim)
+                                        candidates, rim, noise)
         served = np.abs(db - query).sum(axis=1, dtype=np.float64)
         if skip >= 0:
             served[skip] = np.inf
@@ -51,3 +54,8 @@ def ranks(
 def rims_of(descriptions: list[ShapeDescription]) -> np.ndarray:
     """(n,) each description's rim (free boundary over √area), NaN where it has no local signature."""
     return np.array([np.nan if d.local is None else float(d.local.rim) for d in descriptions])
+
+
+def noises_of(descriptions: list[ShapeDescription]) -> np.ndarray:
+    """(n,) each description's input displacement correlation, NaN where it was saved without one."""
+    return np.array([float(d.input_noise) for d in descriptions])

@@ -120,7 +120,8 @@ class DescribeFailure(Exception):
     """Some meshes of the folder could not be described; the message names them."""
 
 
-def _load_variant(path: str, sha: str, variant: Variant) -> Mesh:
+def load_variant(path: str, sha: str, variant: Variant) -> Mesh:
+    """The mesh of one cache entry: the file as loaded, perturbed as `variant` says (seeded by its sha)."""
     mesh = load_mesh(path)
     if variant.noise > 0:
         mesh = perturb(mesh, variant.noise, noise_seed(sha, variant.seed))
@@ -130,7 +131,7 @@ def _load_variant(path: str, sha: str, variant: Variant) -> Mesh:
 def run_task(task: Task) -> str | None:
     """Worker body: describe one mesh into the cache. Returns None, or an error message."""
     try:
-        mesh = _load_variant(task.path, task.sha, task.variant)
+        mesh = load_variant(task.path, task.sha, task.variant)
         if task.description_path:
             desc = describe(mesh, task.params)
             atomic_write(Path(task.description_path), desc.save)

@@ -256,7 +256,8 @@ def _adaptive_lines(
         t0 = time.perf_counter()
         q_vec = np.stack([vocab.encode(d, params) for d in q_descs])
         rims = adaptive.rims_of(q_descs)  # a closed query weighs its Shape-DNA as the fixed fusion at least
-        rank = adaptive.ranks(q_vec, db_vec, left_out, vocab.size, scales.weight, rims=rims)
+        rank = adaptive.ranks(q_vec, db_vec, left_out, vocab.size, scales.weight, rims=rims,
+                              noises=adaptive.noises_of(q_descs))
         if cross is None:
             scores = metrics.retrieval_scores(rank, labels)
         else:

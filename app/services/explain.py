@@ -94,7 +94,7 @@ def query_geometry(
     """An uploaded query: its description and its canonical geometry (one load, as /search loads it)."""
     mesh = load_upload(data, file_type, max_vertices)
     fine, rim = canonical_with_rim(mesh, params)
-    return describe_canonical(fine, mesh.n_vertices, params, rim), from_canonical(fine)
+    return describe_canonical(mesh, fine, rim, params), from_canonical(fine)
 
 
 # ---- in the API process (threads) -------------------------------------------------------------------------

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from app.core import fusion
+from app.core.pipeline import load_input_noise
 from app.core.vocabulary import l1_distance
 from app.services.context import ServiceContext
 from app.services.errors import NotReadyError
@@ -35,12 +36,13 @@ def applies(ctx: ServiceContext, live: LiveIndex) -> bool:
 
 def search(
     ctx: ServiceContext, live: LiveIndex, vector: np.ndarray, k: int, allowed: np.ndarray | None,
-    vocabulary_id: int, exclude: int | None = None, rim: float | None = None,
+    vocabulary_id: int, exclude: int | None = None, rim: float | None = None, noise: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
     """vector (v + c,) fused -> the index's fused L1 distances (<= k,) of the ids (<= k,) in re-ranked
     order, the version that answered, and the re-rank's distances (<= k,, ascending).
     `exclude`: a stored model left out (the one whose neighbours are asked); `rim`: the query's free
-    boundary over √area (None: unknown, weighed as an open surface)."""
+    boundary over √area (None: unknown, weighed as an open surface); `noise`: its input's displacement
+    correlation (None or NaN: unknown, weighed as clean)."""
     pair = live.require()
     if pair.record.id != vocabulary_id or pair.vocabulary.fusion is None:
         raise NotReadyError("the vocabulary changed while the query was encoded; retry")
@@ -62,8 +64,18 @@ def search(
         return kept, (np.stack(rows) if rows else np.zeros((0, len(vector)), np.float32))
 
     ids, dist = fusion.adaptive_rerank(vector, nearest, vectors_of, pair.vocabulary.size, scales.weight, RULE,
-                                       max(CANDIDATES, k), rim)
+                                       max(CANDIDATES, k), rim, noise)
     ids, dist = ids[:k], dist[:k]
     stored = np.stack([seen[int(i)] for i in ids]) if len(ids) else np.zeros((0, len(vector)), np.float32)
     index_distance = l1_distance(stored, vector[None])[:, 0]  # the query as sent: what the index ranks by
     return index_distance.astype(np.float32), ids, vocabulary_id, dist.astype(np.float32)
+
+
+def stored_noise(ctx: ServiceContext, model_id: int) -> float | None:
+    """A stored model's input displacement correlation (None: not recorded, or unreadable): one small
+    read of its description, for `similar`'s re-rank."""
+    try:
+        noise = load_input_noise(ctx.blobs.description_path(model_id))
+    except (OSError, ValueError, KeyError):
+        return None
+    return noise if np.isfinite(noise) else None

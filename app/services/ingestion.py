@@ -96,7 +96,7 @@ def describe_and_view(mesh: Mesh, params: DescribeParams) -> tuple[ShapeDescript
     t = time.perf_counter()
     fine, rim = canonical_with_rim(mesh, params)
     canonical_s = time.perf_counter() - t
-    description = describe_canonical(fine, mesh.n_vertices, params, rim)
+    description = describe_canonical(mesh, fine, rim, params)
     description.seconds["resample"] = description.seconds.get("resample", 0.0) + canonical_s
     return description, fine
 

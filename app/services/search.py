@@ -87,7 +87,7 @@ def search_description(
             if not piece and fusion_rerank.applies(ctx, live):  # a piece is re-ranked by its rim instead
                 rim = None if description.local is None else description.local.rim
                 dist, ids, vid, rerank = fusion_rerank.search(ctx, live, vector, wanted, allowed, vid,
-                                                              rim=rim)
+                                                              rim=rim, noise=description.input_noise)
             else:
                 dist, ids, vid = live.search(vector, wanted, allowed, vocabulary_id=vid)
         except NotReadyError:
@@ -145,7 +145,8 @@ def similar(
             if fusion_rerank.applies(ctx, live):
                 local = partial_mod.local_of(ctx, model_id)  # its rim: closed or open (core.fusion)
                 dist, ids, vid, rerank = fusion_rerank.search(ctx, live, vector, k, allowed, pair.record.id,
-                                                              model_id, None if local is None else local.rim)
+                                                              model_id, None if local is None else local.rim,
+                                                              fusion_rerank.stored_noise(ctx, model_id))
             else:
                 dist, ids, vid = live.search(vector, k + 1, allowed, vocabulary_id=pair.record.id)
         except NotReadyError:

@@ -15,6 +15,7 @@ from app.core.fusion import (
     distinct_first,
     fuse,
     is_closed,
+    is_noisy,
     query_weight,
     split_parts,
 )
@@ -92,9 +93,36 @@ def test_a_closed_querys_floor_changes_the_ranking_where_the_shape_dna_disagrees
     assert np.argmin(adaptive_distances(e, w_closed, cands, 1, 1.0)) == 1
 
 
+def test_a_noisy_closed_query_weighs_its_shape_dna_at_least_the_noisy_weight():
+    rule = AdaptiveRule(weight=0.4, pivot=0.9, power=3.0, closed_weight=1.0, noisy_below=0.0,
+                        noisy_weight=4.0)
+    assert query_weight(0.9, rule, rim=0.0, noise=-0.5) == pytest.approx(4.0)  # closed and noisy
+    assert query_weight(0.9, rule, rim=0.0, noise=0.8) == pytest.approx(1.0)  # closed and clean
+    assert query_weight(0.9, rule, rim=0.0, noise=0.0) == pytest.approx(1.0)  # at the threshold: clean
+    assert query_weight(0.9, rule, rim=0.3, noise=-0.5) == pytest.approx(0.4)  # open: the spectrum moves
+    assert query_weight(0.9, rule, rim=0.0, noise=None) == pytest.approx(1.0)  # unknown: clean
+    assert query_weight(0.9, rule, rim=0.0, noise=float("nan")) == pytest.approx(1.0)
+    assert query_weight(0.09, rule, rim=0.0, noise=-0.5) == pytest.approx(400.0)  # above the floor: unchanged
+    assert is_noisy(-0.01, rule) and not is_noisy(0.0, rule) and not is_noisy(None, rule)
+
+
+def test_the_noisy_floor_changes_the_ranking_where_the_shape_dna_disagrees():
+    """Candidate 0 is nearer by BoF (0 + w × 2), candidate 1 by Shape-DNA (3 + w × 0): a clean closed
+    query (w = 1) keeps candidate 0 first (2 < 3), a noisy one (w = 4) puts candidate 1 first (8 > 3)."""
+    cands = np.array([[0.0, 2.0], [3.0, 0.0], [9.0, 9.0], [9.5, 9.5]], np.float32)  # stored weight 1
+    query = np.zeros(2, np.float32)
+    rule = AdaptiveRule(weight=0.4, neighbours=2, expansion=0, noisy_weight=4.0)
+    w_clean, e = adaptive_query(query, cands, 1, 1.0, rule, rim=0.0, noise=0.8)
+    w_noisy, _ = adaptive_query(query, cands, 1, 1.0, rule, rim=0.0, noise=-0.5)
+    assert w_clean == pytest.approx(1.0) and w_noisy == pytest.approx(4.0)
+    assert np.argmin(adaptive_distances(e, w_clean, cands, 1, 1.0)) == 0
+    assert np.argmin(adaptive_distances(e, w_noisy, cands, 1, 1.0)) == 1
+
+
 @pytest.mark.parametrize("bad", [dict(weight=0), dict(pivot=0), dict(power=-1), dict(neighbours=1),
                                  dict(expansion=-1), dict(closed_weight=-1), dict(closed_rim=-0.1),
-                                 dict(distinct=-0.1), dict(distinct=1.5)])
+                                 dict(distinct=-0.1), dict(distinct=1.5), dict(noisy_below=1.5),
+                                 dict(noisy_weight=-1)])
 def test_rule_validation(bad):
     with pytest.raises(ValueError, match="invalid adaptive fusion rule"):
         AdaptiveRule(**bad)

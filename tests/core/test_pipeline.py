@@ -25,6 +25,7 @@ from app.core.pipeline import (
     describe_filters,
 )
 from app.core.resolution import normalize_scale, to_resolution
+from app.core.roughness import displacement_correlation
 from app.core.smoothing import WEIGHTS, taubin
 from app.core.spectrum import smallest_eigenpairs
 from app.core.vocabulary import Vocabulary, l1_distance
@@ -243,7 +244,8 @@ def by_stages(mesh: Mesh, p: DescribeParams, flt: KeypointFilter | None = None) 
 def same(a: ShapeDescription, b: ShapeDescription) -> bool:
     return (np.array_equal(a.hks, b.hks) and np.array_equal(a.weights, b.weights)
             and np.array_equal(a.keypoints, b.keypoints) and np.array_equal(a.eigenvalues, b.eigenvalues)
-            and a.input_vertices == b.input_vertices and same_local(a, b))
+            and a.input_vertices == b.input_vertices and same_local(a, b)
+            and np.array_equal(a.input_noise, b.input_noise, equal_nan=True))
 
 
 def same_local(a: ShapeDescription, b: ShapeDescription) -> bool:
@@ -430,10 +432,22 @@ def test_a_description_round_trips_through_npz_bit_for_bit(tmp_path):
     assert again.seconds == {}  # timings are not stored
     with np.load(tmp_path / "d.npz") as z:
         assert sorted(z.files) == [
-            "eigenvalues", "format", "hks_packed", "hks_shape", "input_vertices", "keypoints",
+            "eigenvalues", "format", "hks_packed", "hks_shape", "input_noise", "input_vertices", "keypoints",
             "local_area", "local_rim", "local_slopes", "local_valid", "local_vertex", "weights"
         ]
         assert int(z["format"]) == DESCRIPTION_FORMAT == 3
+    assert again.input_noise == desc.input_noise == displacement_correlation(CIGAR)  # of the mesh as given
+
+
+def test_a_description_saved_before_the_input_noise_reads_it_as_unknown(tmp_path):
+    desc = describe(CIGAR, SMALL)
+    desc.save(tmp_path / "d.npz")
+    with np.load(tmp_path / "d.npz") as z:
+        older = {name: z[name] for name in z.files if name != "input_noise"}
+    np.savez(tmp_path / "old.npz", **older)
+    assert np.isnan(ShapeDescription.load(tmp_path / "old.npz").input_noise)
+    assert np.isnan(pipeline.load_input_noise(tmp_path / "old.npz"))
+    assert pipeline.load_input_noise(tmp_path / "d.npz") == desc.input_noise
 
 
 def test_save_accepts_a_str_path_and_load_makes_the_keypoints_bool(tmp_path):

@@ -8,7 +8,13 @@ import trimesh
 
 from app.core.mesh import Mesh
 from app.core.pipeline import DescribeParams, describe, smooth
-from app.core.roughness import median_edge_length, roughness, smooth_until, vertex_normals
+from app.core.roughness import (
+    displacement_correlation,
+    median_edge_length,
+    roughness,
+    smooth_until,
+    vertex_normals,
+)
 from app.core.smoothing import taubin
 
 
@@ -110,3 +116,38 @@ def test_adaptive_describe_of_a_clean_fine_mesh_equals_the_unsmoothed_describe()
     a = describe(sphere, params)
     b = describe(sphere, DescribeParams(k=20, m=16, smoothing=0))
     np.testing.assert_allclose(a.eigenvalues, b.eigenvalues, rtol=1e-9)
+
+
+def _ellipsoid(subdivisions: int = 4) -> Mesh:
+    sphere = _sphere(subdivisions)
+    return Mesh(sphere.vertices * [1.0, 0.6, 0.3], sphere.faces)  # curvature varies over the surface
+
+
+def test_displacement_correlation_is_positive_on_a_smooth_surface_and_negative_under_vertex_noise():
+    """δ follows the curvature on a smooth surface (neighbours alike); white vertex noise puts each
+    vertex's own offset into δ_i and, with the opposite sign, into its neighbours' (module docstring)."""
+    ellipsoid = _ellipsoid()
+    assert displacement_correlation(ellipsoid) > 0.5
+    for sigma in (0.05, 0.3):
+        assert displacement_correlation(_noisy(ellipsoid, sigma)) < 0.0
+
+
+def test_displacement_correlation_ignores_scale_rigid_motion_and_vertex_order():
+    mesh = _noisy(_ellipsoid(3), 0.1)
+    base = displacement_correlation(mesh)
+    rot = trimesh.transformations.random_rotation_matrix(np.random.default_rng(2).random(3))[:3, :3]
+    moved = Mesh(mesh.vertices @ rot.T * 25.4 + [3.0, -1.0, 7.0], mesh.faces)
+    perm = np.random.default_rng(3).permutation(mesh.n_vertices)
+    inverse = np.argsort(perm)
+    shuffled = Mesh(mesh.vertices[perm], inverse[mesh.faces])
+    assert displacement_correlation(moved) == pytest.approx(base, abs=1e-9)
+    assert displacement_correlation(shuffled) == pytest.approx(base, abs=1e-9)
+
+
+def test_displacement_correlation_is_undefined_without_a_varying_displacement():
+    assert np.isnan(displacement_correlation(Mesh(np.zeros((3, 3)), np.zeros((0, 3), np.int64))))
+    grid = trimesh.creation.box().subdivide()
+    square = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float)
+    flat_side = Mesh(square, np.array([[0, 1, 2], [1, 3, 2]]))
+    assert np.isnan(displacement_correlation(flat_side))  # a plane: δ ≡ 0
+    assert np.isfinite(displacement_correlation(Mesh(np.asarray(grid.vertices), np.asarray(grid.faces))))

@@ -51,7 +51,7 @@ def ctx(settings):
 
 def test_a_swap_between_encode_and_search_is_encoded_again(ctx):
     live = SwappingLive([1, 2, 3], swaps=2)
-    result = search.search_description(ctx, live, SimpleNamespace(local=None), k=3)  # type: ignore[arg-type]
+    result = search.search_description(ctx, live, SimpleNamespace(local=None, input_noise=None), k=3)  # type: ignore[arg-type]
     assert live.encodes == 3 and [h.model.id for h in result.hits] == [1, 2, 3]
     assert result.vocabulary_id == 4  # the vocabulary of the last encode, not the first
 
@@ -59,7 +59,7 @@ def test_a_swap_between_encode_and_search_is_encoded_again(ctx):
 def test_swaps_that_never_settle_are_a_clear_503(ctx):
     live = SwappingLive([1], swaps=10)
     with pytest.raises(NotReadyError, match="swapped"):
-        search.search_description(ctx, live, SimpleNamespace(local=None), k=3)  # type: ignore[arg-type]
+        search.search_description(ctx, live, SimpleNamespace(local=None, input_noise=None), k=3)  # type: ignore[arg-type]
     assert live.encodes == 3
 
 
@@ -67,7 +67,7 @@ def test_models_deleted_a_moment_ago_are_skipped_and_ranks_stay_contiguous(ctx):
     with ctx.db.write() as conn:
         models_repo.delete(conn, 2)
     live = SwappingLive([1, 2, 99, 3, 4, 5], swaps=0)  # 2: just deleted, 99: never existed
-    result = search.search_description(ctx, live, SimpleNamespace(local=None), k=3)  # type: ignore[arg-type]
+    result = search.search_description(ctx, live, SimpleNamespace(local=None, input_noise=None), k=3)  # type: ignore[arg-type]
     assert [(h.model.id, h.rank) for h in result.hits] == [(1, 1), (3, 2), (4, 3)]
     assert [h.distance for h in result.hits] == [0.0, 3.0, 4.0]
 
@@ -75,12 +75,13 @@ def test_models_deleted_a_moment_ago_are_skipped_and_ranks_stay_contiguous(ctx):
 @pytest.mark.parametrize("k", [0, -1, search.MAX_K + 1, 10**6])
 def test_k_out_of_range_is_refused(ctx, k):
     with pytest.raises(InvalidInputError, match=f"between 1 and {search.MAX_K}"):
-        search.search_description(ctx, SwappingLive([1], 0), SimpleNamespace(local=None), k=k)  # type: ignore[arg-type]
+        whole = SimpleNamespace(local=None, input_noise=None)
+        search.search_description(ctx, SwappingLive([1], 0), whole, k=k)  # type: ignore[arg-type]
     with pytest.raises(InvalidInputError):
         search.similar(ctx, SwappingLive([1], 0), 1, k=k)  # type: ignore[arg-type]
 
 
 def test_k_at_the_bound_is_served(ctx):
-    closed = SimpleNamespace(local=None)
+    closed = SimpleNamespace(local=None, input_noise=None)
     result = search.search_description(ctx, SwappingLive([1, 2, 3], 0), closed, k=search.MAX_K)  # type: ignore[arg-type]
     assert len(result.hits) == 3

@@ -95,7 +95,7 @@ def _expected(query: np.ndarray, leave_out: int | None = None) -> list[int]:
 
 
 def test_a_query_is_answered_in_the_adaptive_order(ctx):
-    result = search.search_description(ctx, BruteLive(), SimpleNamespace(local=None), k=6)  # type: ignore[arg-type]
+    result = search.search_description(ctx, BruteLive(), SimpleNamespace(local=None, input_noise=None), k=6)  # type: ignore[arg-type]
     got = [h.model.id for h in result.hits]
     assert got == _expected(QUERY)
     assert set(got[:3]) == {1, 2, 3}  # the Shape-DNA's class first (the fixed fusion ranks 4 first)
@@ -110,7 +110,7 @@ def test_a_query_is_answered_in_the_adaptive_order(ctx):
 def test_a_stored_copy_of_the_query_stays_first_at_distance_zero(ctx, monkeypatch):
     copy = np.array(STORED[5], np.float32)
     monkeypatch.setattr(BruteLive, "encode", lambda self, description: (VOCAB_ID, copy))
-    result = search.search_description(ctx, BruteLive(), SimpleNamespace(local=None), k=3)  # type: ignore[arg-type]
+    result = search.search_description(ctx, BruteLive(), SimpleNamespace(local=None, input_noise=None), k=3)  # type: ignore[arg-type]
     first = result.hits[0]
     assert first.model.id == 5 and first.distance == 0.0 and first.rerank is not None
 
@@ -121,7 +121,7 @@ def test_off_or_pure_bof_serves_the_index_order(ctx, settings):
     assert Settings().fusion_rerank is True  # on by default
     off = open_context(settings.model_copy(update={"fusion_rerank": False}))
     for c, live in ((ctx, BruteLive(fused=False)), (off, BruteLive())):
-        result = search.search_description(c, live, SimpleNamespace(local=None), k=6)  # type: ignore[arg-type]
+        result = search.search_description(c, live, SimpleNamespace(local=None, input_noise=None), k=6)  # type: ignore[arg-type]
         assert [h.model.id for h in result.hits] == fixed
         assert live.searches == 1 and all(h.rerank is None for h in result.hits)
 
@@ -137,13 +137,13 @@ def test_similar_leaves_the_model_out_of_its_candidates(ctx):
 
 def test_k_cuts_the_reranked_list_and_deleted_models_are_dropped(ctx, deleted):
     deleted.add(1)
-    result = search.search_description(ctx, BruteLive(), SimpleNamespace(local=None), k=2)  # type: ignore[arg-type]
+    result = search.search_description(ctx, BruteLive(), SimpleNamespace(local=None, input_noise=None), k=2)  # type: ignore[arg-type]
     assert len(result.hits) == 2 and 1 not in [h.model.id for h in result.hits]
 
 
 def test_a_swap_during_the_rerank_is_retried(ctx):
     live = BruteLive(swaps=1)
-    result = search.search_description(ctx, live, SimpleNamespace(local=None), k=3)  # type: ignore[arg-type]
+    result = search.search_description(ctx, live, SimpleNamespace(local=None, input_noise=None), k=3)  # type: ignore[arg-type]
     assert [h.model.id for h in result.hits] == _expected(QUERY)[:3]
     live = BruteLive()
     with pytest.raises(NotReadyError, match="changed"):
@@ -171,10 +171,11 @@ def test_the_faiss_index_and_the_database_serve_what_the_core_ranks(data_dir):
 
     assert np.all(np.diff(db_ids) > 0)
     local = partial_mod.local_of(ctx, mid)  # the stored model's rim decides its floor (closed or open)
-    assert local is not None
+    noise = fusion_rerank.stored_noise(ctx, mid)  # and its input's noise, whether a closed one is noisy
+    assert local is not None and noise is not None and -1.0 <= noise <= 1.0
     want, dist = fusion.adaptive_rerank(vectors[0], nearest, vectors_of, pair.vocabulary.size,
                                         pair.vocabulary.fusion.weight, fusion_rerank.RULE,
-                                        fusion_rerank.CANDIDATES, local.rim)
+                                        fusion_rerank.CANDIDATES, local.rim, noise)
     result = search.similar(ctx, live, mid, k=5)
     assert [h.model.id for h in result.hits] == want[:5].tolist()
     np.testing.assert_allclose([h.rerank for h in result.hits], dist[:5], rtol=1e-5)
@@ -182,25 +183,27 @@ def test_the_faiss_index_and_the_database_serve_what_the_core_ranks(data_dir):
     np.testing.assert_allclose([h.distance for h in result.hits], index_l1, rtol=1e-5)
 
 
-@pytest.mark.parametrize("rim", [0.0, 0.1])
-def test_the_querys_rim_reaches_the_rule(ctx, monkeypatch, rim):
-    """A whole query (rim under the piece threshold) is re-ranked with its own rim: closed (0) or open."""
-    seen: list[float | None] = []
+@pytest.mark.parametrize(("rim", "noise"), [(0.0, 0.8), (0.1, 0.8), (0.0, -0.5)])
+def test_the_querys_rim_and_noise_reach_the_rule(ctx, monkeypatch, rim, noise):
+    """A whole query (rim under the piece threshold) is re-ranked with its own rim, closed (0) or open,
+    and its own input noise."""
+    seen: list[tuple[float | None, float | None]] = []
     real = fusion.adaptive_rerank
 
     def spy(*args, **kwargs):
-        seen.append(args[7] if len(args) > 7 else kwargs.get("rim"))
+        seen.append((args[7] if len(args) > 7 else kwargs.get("rim"),
+                     args[8] if len(args) > 8 else kwargs.get("noise")))
         return real(*args, **kwargs)
 
     monkeypatch.setattr(fusion_rerank.fusion, "adaptive_rerank", spy)
     monkeypatch.setattr(search.partial_mod, "score", lambda ctx, local, ids: [None] * len(ids))
-    query = SimpleNamespace(local=SimpleNamespace(rim=rim))
+    query = SimpleNamespace(local=SimpleNamespace(rim=rim), input_noise=noise)
     result = search.search_description(ctx, BruteLive(), query, k=6)  # type: ignore[arg-type]
-    assert seen == [rim]
+    assert seen == [(rim, noise)]
     assert not result.hits[0].partial
     ids = np.array(sorted(STORED))
     db = np.array([STORED[i] for i in ids], np.float32)
     want, _ = real(QUERY, lambda v, n: ids[np.argsort(np.abs(db - v).sum(1), kind="stable")[:n]],
                    lambda j: (j, db[np.searchsorted(ids, j)]), 1, 1.0, fusion_rerank.RULE,
-                   fusion_rerank.CANDIDATES, rim)
+                   fusion_rerank.CANDIDATES, rim, noise)
     assert [h.model.id for h in result.hits] == want.tolist()

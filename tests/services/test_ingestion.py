@@ -417,4 +417,6 @@ def test_a_stored_description_has_the_rim_of_the_same_mesh_described_as_a_query(
     assert fine.n_vertices == canonical_mesh(mesh, params).n_vertices
     # what the ingest stored before: the capped mesh described as if it were closed (its own open boundary)
     as_closed = _rim_mask(fine.faces, fine.n_vertices, fine.n_vertices)
-    assert describe_canonical(fine, mesh.n_vertices, params, as_closed).local.rim == 0.0
+    assert describe_canonical(mesh, fine, as_closed, params).local.rim == 0.0
+    # the ingest records the noise of the mesh as given, as describe() does
+    assert got.input_noise == pytest.approx(want.input_noise) and np.isfinite(got.input_noise)

@@ -138,7 +138,7 @@ class EncodingLive(FakeLive):
 
 def test_search_description_passes_query_k_and_label_through(ctx):
     live = EncodingLive([1, 2, 3, 4, 5])
-    query = SimpleNamespace(local=None)  # a closed query: no local signature
+    query = SimpleNamespace(local=None, input_noise=None)  # a closed query: no local signature
     result = search.search_description(ctx, live, query, k=2, label="b")  # type: ignore[arg-type]
     assert live.described == [query]
     assert live.vectors[0].tolist() == [42.0] * 4
@@ -150,7 +150,8 @@ def test_search_description_passes_query_k_and_label_through(ctx):
 def test_search_description_times_encode_and_search_apart(ctx, monkeypatch):
     ticks = iter([10.0, 11.5, 20.0, 20.25, 30.0, 30.125])
     monkeypatch.setattr(search, "time", SimpleNamespace(perf_counter=lambda: next(ticks)))
-    result = search.search_description(ctx, EncodingLive([1]), SimpleNamespace(local=None), k=1)  # type: ignore[arg-type]
+    whole = SimpleNamespace(local=None, input_noise=None)
+    result = search.search_description(ctx, EncodingLive([1]), whole, k=1)  # type: ignore[arg-type]
     assert result.seconds == {"encode": 1.5, "search": 0.25, "partial": 0.125}
 
 
@@ -164,5 +165,5 @@ def test_search_description_gives_up_after_three_swaps_in_words(ctx):
     live = EncodingLive([1])
     live.swaps = 3
     with pytest.raises(NotReadyError, match=r"^the vocabulary is being swapped; retry$"):
-        search.search_description(ctx, live, SimpleNamespace(local=None), k=1)  # type: ignore[arg-type]
+        search.search_description(ctx, live, SimpleNamespace(local=None, input_noise=None), k=1)  # type: ignore[arg-type]
     assert len(live.calls) == 3
