@@ -194,3 +194,15 @@ def test_faces_in_another_order_keep_the_exact_entries_and_are_found_identical()
     assert may_relate(a, b)
     ev = relate(a, b)
     assert ev.relation == "identical" and not ev.screened
+
+
+def test_the_same_triangles_in_another_winding_are_verified() -> None:
+    """Some faces flipped: the signed volume (entry 3) moves, the triangles are the same; the gate
+    lets the pair through and relate finds it identical (triangles are compared as vertex sets)."""
+    b = _prepared(hull_trimesh(11))
+    faces = b.mesh.faces.copy()
+    faces[::3] = faces[::3, ::-1]
+    a = Prepared(Mesh(b.mesh.vertices, faces))
+    diff = np.abs(a.fingerprint - b.fingerprint)
+    assert diff[3] > SAME_BOX[3] and np.all(diff[G.WINDING_FREE] <= G.EXACT_MATCH)  # the premises
+    assert may_relate(a, b) and relate(a, b).relation == "identical"
