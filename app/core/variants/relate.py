@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from app.core.variants.align import ICP_ITERATIONS, Similarity, hypotheses, icp_batch, to_world, umeyama
+from app.core.variants.anchors import anchored_fits
 from app.core.variants.gate import RADIUS, may_relate
 from app.core.variants.onesided import LiesOn, cover_margin, side, vertex_subset
 from app.core.variants.prepared import Prepared, face_keys
@@ -171,7 +172,15 @@ def verify(a: Prepared, b: Prepared) -> Evidence:
     middle = _evidence(a, b, best, points=MIDDLE_POINTS, decide=MIDDLE_MARGIN)
     if middle.relation == "similar" and middle.confidence >= 1.0 - 0.5 / MIDDLE_MARGIN:
         return middle
-    return _evidence(a, b, best)
+    found = _evidence(a, b, best)
+    if same_count and found.relation == "retriangulated" and found.lies_on_other is None:
+        # the same surface with as many faces: perhaps the same triangles, renumbered, of a
+        # symmetric shape the surface fit cannot orient (anchors.py)
+        for fit in anchored_fits(a, b):
+            exact = _exact(a, b, fit)
+            if exact is not None:
+                return _exact_evidence(b, *exact)
+    return found
 
 
 def _fine_fit(
