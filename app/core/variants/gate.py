@@ -24,12 +24,14 @@ boxes rule out 221 before any fit and keep the 3; both benchmark samples give th
 Entries 7-16 are quantiles of surface samples drawn in face order, so the same surface with its faces
 in another order (a repair tool, an exporter, a renumbering) moves them by sampling noise alone; the
 boxes above, taken from pairs most of which kept the face order, were narrower than that noise on
-five entries (the D2 10 % quantile: 0.03, where two samplings of one SHREC'11 snake differ by 0.046).
+six entries of SAME_BOX and one of COARSE_BOX (the D2 10 % quantile: 0.03 in both, where two samplings
+of one surface differ by up to 0.046).
 So each entry's bound is at least NOISE_FLOOR, 1.25 times the largest gap between two samplings of
 one surface (`python -m benchmarks.variants_noise --draws 20`: 116 meshes none of the benchmark's
 bases, 2,320 re-orderings), rounded up to 0.01. And since entries 0-6 are exact integrals of the
 triangles, which no order changes, a pair whose entries 0-6 agree to rounding (EXACT_MATCH) may have
-the same triangles: it is verified whatever its sampled entries say (within RADIUS). Entry 3 is left
+the same triangles: it is verified whatever its sampled entries say, within SAME_RADIUS of them (the
+noise reaches 0.13). Entry 3 is left
 out of that test: it is the signed volume, which a repair tool that makes the winding coherent
 changes while the triangles stay the same (a realworld mesh with some faces flipped: 0.39 apart on
 that entry alone, identical).
