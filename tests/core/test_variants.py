@@ -159,3 +159,43 @@ def test_a_copy_moved_with_its_vertex_order_is_found_where_the_axes_cannot_find_
     assert relate(Prepared(Mesh(a.mesh.vertices + noise, a.mesh.faces)), a).relation == "retriangulated"
     mirror = Prepared(Mesh(a.mesh.vertices * [-1.0, 1.0, 1.0], a.mesh.faces[:, ::-1]))
     assert relate(mirror, a).relation == "mirrored"  # found by the hypotheses, as before
+
+
+def test_the_same_triangles_are_found_from_a_final_fit_a_few_per_cent_off() -> None:
+    """After the fine fit, the vertex ICP starts from farther (FINAL_REACH): a renumbered copy of a
+    near-symmetric shape whose surface fit ended a fraction of a facet off still snaps onto its
+    vertices; from the same start the first tries' reach (2 % of the diagonal) does not."""
+    import importlib
+
+    from app.core.variants.align import Similarity
+
+    rel = importlib.import_module("app.core.variants.relate")
+    b = Prepared(_hull(4))
+    perm = np.random.default_rng(2).permutation(b.mesh.n_vertices)
+    inverse = np.empty_like(perm)
+    inverse[perm] = np.arange(len(perm))
+    a = Prepared(Mesh(b.mesh.vertices[perm] * 3.0, inverse[b.mesh.faces]))  # rescaled, renumbered
+    angle = 0.1
+    turn = np.array([[np.cos(angle), -np.sin(angle), 0.0], [np.sin(angle), np.cos(angle), 0.0], [0, 0, 1]])
+    off = Similarity(1.0 / 3.0, turn, np.zeros(3))  # the true map is scale 1/3, no turn
+    moved = np.linalg.norm(off.apply(a.mesh.vertices) - a.mesh.vertices / 3.0, axis=1).max() / b.diagonal
+    assert 0.02 < moved < rel.FINAL_REACH  # the premise: a few per cent off at the far vertices
+    assert rel._exact(a, b, off) is None
+    found = rel._exact(a, b, off, rel.FINAL_REACH, rel.FINAL_ROUNDS)
+    assert found is not None and found[0].scale == pytest.approx(1.0 / 3.0, rel=1e-9) and found[1] < 1e-9
+
+
+def test_the_fine_fit_offers_a_fit_of_each_handedness() -> None:
+    """A mirrored copy of a nearly mirror-symmetric shape may fit its surface best by a proper motion:
+    the same-triangle test after the fine fit then needs the best mirrored fit too."""
+    import importlib
+
+    rel = importlib.import_module("app.core.variants.relate")
+    b = Prepared(_hull(5))
+    a = Prepared(Mesh(b.mesh.vertices * [-1.0, 1.0, 1.0], b.mesh.faces[:, ::-1]))
+    ranked = rel._hypotheses(a, b, rel.SCREEN_KEEP_EXACT)
+    rough = [r[1] for r in ranked if not r[1].mirrored][:2] + [r[1] for r in ranked if r[1].mirrored][:2]
+    cost, best, fits = rel._fine_fit(a, b, rough)
+    assert fits[0] is best and sorted(f.mirrored for f in fits) == [False, True]
+    mirrored = next(f for f in fits if f.mirrored)
+    assert rel._exact(a, b, mirrored, rel.FINAL_REACH, rel.FINAL_ROUNDS) is not None

@@ -84,7 +84,7 @@ def test_the_fine_fit_of_the_rough_hypotheses_recovers_a_known_similarity(random
     rough = [f for _, f in ranked if not f.mirrored][: r.REFINE]
     rough += [f for _, f in ranked if f.mirrored][: r.REFINE]
     assert len(rough) == 4
-    _, fit = r._fine_fit(a, b, rough)
+    _, fit, _ = r._fine_fit(a, b, rough)
     assert fit.mirrored == mirror and fit.scale == pytest.approx(25.4, rel=1e-3)
     # sample-to-sample ICP: within a sample spacing's fraction (a wrong turn is off by tens of per cent)
     assert np.abs(fit.apply(v) - moved).max() < 0.01 * b.diagonal

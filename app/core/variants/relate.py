@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from app.core.variants.align import ICP_ITERATIONS, Similarity, hypotheses, icp_batch, to_world, umeyama
+from app.core.variants.anchors import anchored_fits
 from app.core.variants.gate import RADIUS, may_relate
 from app.core.variants.onesided import LiesOn, cover_margin, side, vertex_subset
 from app.core.variants.prepared import Prepared, face_keys
@@ -53,6 +54,12 @@ MIDDLE_POINTS = 512  # after the fine fit, the distances on this many samples fi
 MIDDLE_MARGIN = 2.0  # ... decide `similar` at twice the tolerances (a subsample's largest distance is
 # never above the full samples', its means and quantiles are within a few per cent of theirs)
 EXACT_ROUNDS = 4
+# after the fine fit, the same triangles are looked for from farther and for longer: a near-symmetric
+# renumbered copy (a faceted cylinder, a cake) fits its own surface at any turn about the axis, and
+# the surface fit may end a fraction of a facet off, 1-3 % of the diagonal at the vertices; vertex ICP
+# from there snaps onto the vertices, and the exact test below still decides
+FINAL_REACH = 0.1
+FINAL_ROUNDS = 12
 EXACT_TOL = 1e-4  # same triangles: every vertex within this fraction of the diagonal of its partner
 MAX_PARTS = 8  # objects of a multi-object mesh verified one by one ...
 PART_RADIUS = RADIUS  # ... against the objects of the other that gate.may_relate lets through, the nearest
@@ -154,21 +161,35 @@ def verify(a: Prepared, b: Prepared) -> Evidence:
     # (the centroids already meet at 0)
     rough = [r[1] for r in ranked if not r[1].mirrored][:REFINE]
     rough += [r[1] for r in ranked if r[1].mirrored][:REFINE]
-    cost, best = _fine_fit(a, b, rough)
-    exact = _exact(a, b, best) if same_count else None  # the same vertices after all?
-    if exact is not None:
-        return _exact_evidence(b, *exact)
+    cost, best, fits = _fine_fit(a, b, rough)
+    # the same vertices after all? from each handedness's final fit: a mirrored copy of a nearly
+    # mirror-symmetric shape fits its surface about as well either way, and the proper fit wins there
+    for fit in fits if same_count else []:
+        exact = _exact(a, b, fit, FINAL_REACH, FINAL_ROUNDS)
+        if exact is not None:
+            return _exact_evidence(b, *exact)
     # under the final fit, a quarter of the samples first: twice past every tolerance there is `similar`
     middle = _evidence(a, b, best, points=MIDDLE_POINTS, decide=MIDDLE_MARGIN)
     if middle.relation == "similar" and middle.confidence >= 1.0 - 0.5 / MIDDLE_MARGIN:
         return middle
-    return _evidence(a, b, best)
+    found = _evidence(a, b, best)
+    if same_count and found.relation == "retriangulated" and found.lies_on_other is None:
+        # the same surface with as many faces: perhaps the same triangles, renumbered, of a
+        # symmetric shape the surface fit cannot orient (anchors.py)
+        for fit in anchored_fits(a, b):
+            exact = _exact(a, b, fit)
+            if exact is not None:
+                return _exact_evidence(b, *exact)
+    return found
 
 
-def _fine_fit(a: Prepared, b: Prepared, rough: list[Similarity]) -> tuple[float, Similarity]:
+def _fine_fit(
+    a: Prepared, b: Prepared, rough: list[Similarity]
+) -> tuple[float, Similarity, list[Similarity]]:
     """_polished() on FINE_POINTS of a's samples from the turns of the rough fits (the centroids
     already meet at 0); of more than 2 of them, only the best of each handedness after FINE_SETTLE
-    rounds goes on (both samples' verdicts unchanged: docs/variants.md)."""
+    rounds goes on (both samples' verdicts unchanged: docs/variants.md). Also the best final fit of
+    each handedness, the chosen one first."""
     fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
     starts, rounds = [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough], ICP_ITERATIONS
     if len(starts) > 2:
@@ -178,7 +199,11 @@ def _fine_fit(a: Prepared, b: Prepared, rough: list[Similarity]) -> tuple[float,
         starts = [next(f for _, f in ranked if f.mirrored == m) for m in (False, True)
                   if any(f.mirrored == m for f in fits)]
         rounds -= FINE_SETTLE
-    return _polished(a, b, fine, starts, rounds)
+    refined = _polished_all(a, b, fine, starts, rounds)
+    cost, best = _choose(refined)
+    others = [min((r for r in refined if r[1].mirrored == m), key=lambda r: r[0])[1]
+              for m in (False, True) if any(r[1].mirrored == m for r in refined)]
+    return cost, best, [best] + [f for f in others if f is not best]
 
 
 def _same_order_fit(a: Prepared, b: Prepared) -> Similarity | None:
@@ -205,8 +230,19 @@ def _polished(
 ) -> tuple[float, Similarity]:
     """ICP with scale of `points` (a's, normalised) from each rough fit; the best as (cost, similarity
     between the meshes' own coordinates), a mirrored one only when clearly better (MIRROR_MARGIN)."""
+    return _choose(_polished_all(a, b, points, rough, rounds))
+
+
+def _polished_all(
+    a: Prepared, b: Prepared, points: np.ndarray, rough: list[Similarity], rounds: int
+) -> list[tuple[float, Similarity]]:
+    """(cost, similarity between the meshes' own coordinates) of ICP with scale from each rough fit."""
     fits, costs = icp_batch(points, b.normalised_tree, b.normalised_samples, rough, rounds, with_scale=True)
-    refined = list(zip(costs.tolist(), [to_world(a.frame, b.frame, f) for f in fits], strict=True))
+    return list(zip(costs.tolist(), [to_world(a.frame, b.frame, f) for f in fits], strict=True))
+
+
+def _choose(refined: list[tuple[float, Similarity]]) -> tuple[float, Similarity]:
+    """The best proper fit, or the best mirrored one when clearly better (MIRROR_MARGIN)."""
     proper = min((r for r in refined if not r[1].mirrored), key=lambda r: r[0], default=None)
     improper = min((r for r in refined if r[1].mirrored), key=lambda r: r[0], default=None)
     if proper is None or (improper is not None and improper[0] < MIRROR_MARGIN * proper[0]):
@@ -234,29 +270,37 @@ def _hypotheses(a: Prepared, b: Prepared, keep: int) -> list[tuple[float, Simila
     return ranked
 
 
-def _exact(a: Prepared, b: Prepared, guess: Similarity) -> tuple[Similarity, float] | None:
+def _exact(
+    a: Prepared, b: Prepared, guess: Similarity, reach: float = 0.02, rounds: int = EXACT_ROUNDS
+) -> tuple[Similarity, float] | None:
     """The similarity fitted on vertex correspondences, and its largest vertex residual, if a's
     triangles are b's triangles under it: every vertex of a within EXACT_TOL of a vertex of b,
     and a's triangles, through that vertex map, exactly b's set of triangles. The map may join two of
-    a's vertices that a file format's rounding made one (a weld), never two distinct ones."""
+    a's vertices that a file format's rounding made one (a weld), never two distinct ones. The vertex
+    ICP starts only when every vertex under `guess` is within `reach` (of the diagonal) of one of b's
+    and runs at most `rounds` rounds."""
     if not _face_counts_match(a, b):
         return None
     va, vb = a.mesh.vertices, b.mesh.vertices
     fit = guess
     probe = va[:: max(1, len(va) // 256)]  # every vertex must be near: a few far ones end it cheaply
-    if b.vertex_tree.query(fit.apply(probe), workers=1)[0].max() > 0.02 * b.diagonal:
+    if b.vertex_tree.query(fit.apply(probe), workers=1)[0].max() > reach * b.diagonal:
         return None
     # float32 files round each coordinate to 2^-24 of its magnitude, text files to a number of decimals
     # (6 in many exporters: 5e-7 absolute, 5e-5 of a 1 cm part in metres); 1e-4 of the size covers both
-    for _ in range(EXACT_ROUNDS):  # vertex ICP: from a close guess, the map is right after a round or two
+    previous = np.inf
+    for _ in range(rounds):  # vertex ICP: from a close guess, the map is right after a round or two
         dist, idx = b.vertex_tree.query(fit.apply(va), workers=1)
-        if dist.max() > 0.02 * b.diagonal:
+        if dist.max() > reach * b.diagonal:
             return None
         fit = umeyama(va, vb[idx], mirrored=guess.mirrored)
         residual = float(np.linalg.norm(fit.apply(va) - vb[idx], axis=1).max())
         extent = np.abs(vb).max() + fit.scale * np.abs(va).max()
         if residual <= EXACT_TOL * b.diagonal + 2.0**-22 * extent:
             break
+        if residual >= 0.99 * previous:
+            return None  # settled above the tolerance (a noisy copy): more rounds change nothing
+        previous = residual
     else:
         return None
     # b's own vertices closer than the tolerance count as one (a format's rounding joins them)
