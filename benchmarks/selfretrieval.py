@@ -67,18 +67,19 @@ def _rim(description) -> float:
     return float("nan") if description.local is None else float(description.local.rim)
 
 
-def scores(queries: np.ndarray, originals: np.ndarray,
-           rerank: tuple[int, float] | None = None, rims: np.ndarray | None = None) -> dict[str, float]:
+def scores(queries: np.ndarray, originals: np.ndarray, rerank: tuple[int, float] | None = None,
+           rims: np.ndarray | None = None, noises: np.ndarray | None = None) -> dict[str, float]:
     """Query i's own original is originals[i]. queries, originals (n, d) -> NN, MRR, top 5.
     rerank (words, stored Shape-DNA weight): ranked as the service's query-adaptive fusion re-rank
-    ranks fused vectors (app.evaluation.adaptive), not by the index's L1, with the queries' rims (q,)."""
+    ranks fused vectors (app.evaluation.adaptive), not by the index's L1, with the queries' rims (q,)
+    and input noises (q,)."""
     from app.core.vocabulary import l1_distance
     from app.evaluation import adaptive
 
     if rerank is None:
         d = l1_distance(queries, originals)  # (n, n)
     else:  # each original's place in each copy's list
-        d = adaptive.ranks(queries, originals, np.full(len(queries), -1), *rerank, rims=rims)
+        d = adaptive.ranks(queries, originals, np.full(len(queries), -1), *rerank, rims=rims, noises=noises)
     own = np.diagonal(d)[:, None]
     rank = 1 + (d < own).sum(axis=1)  # ties count in the copy's favour, as FAISS's order may
     return {"NN": float(np.mean(rank == 1)), "MRR": float(np.mean(1.0 / rank)),
@@ -106,6 +107,8 @@ def run(patterns: list[str], jobs: int, params_kwargs: dict, seed: int,
                             **{c: np.stack([vocab.encode(r[c], fused) for r in ok])
                                for c in ("original", "retriangulated", "noisy")},
                             **{f"rim_{c}": np.array([_rim(r[c]) for r in ok])
+                               for c in ("original", "retriangulated", "noisy")},
+                            **{f"noise_{c}": np.array([r[c].input_noise for r in ok])
                                for c in ("original", "retriangulated", "noisy")})
     lines = {}
     rerank = (vocab.size, vocab.fusion.weight) if vocab.fusion is not None and fused.fusion else None
@@ -118,7 +121,8 @@ def run(patterns: list[str], jobs: int, params_kwargs: dict, seed: int,
         for copy in ("retriangulated", "noisy"):
             queries = np.stack([vocab.encode(r[copy], enc) for r in ok])
             rims = np.array([_rim(r[copy]) for r in ok])
-            lines[(label, copy)] = scores(queries, originals, order, rims)
+            noises = np.array([r[copy].input_noise for r in ok])
+            lines[(label, copy)] = scores(queries, originals, order, rims, noises)
     return {"files": len(ok), "refused": len(entries) - len(described), "failed": [(r["name"], r["error"])
             for r in failed], "describe": params_kwargs, "seed": seed,
             "vocabulary": str(vocabulary or "shipped"),
