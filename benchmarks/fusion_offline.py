@@ -20,6 +20,7 @@ rule's worst margin against the better of BoF and Shape-DNA.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import time
 from collections.abc import Callable
@@ -30,6 +31,7 @@ import numpy as np
 
 from app.core import fusion
 from app.core.baselines import euclidean_distance, shape_dna
+from app.core.meshdata import InvalidMeshError
 from app.core.pipeline import DescribeParams, ShapeDescription
 from app.core.roughness import displacement_correlation
 from app.core.vocabulary import EncodeParams, Vocabulary, l1_distance
@@ -75,7 +77,8 @@ def _load(folder: sets.Folder, cache: Path, variant: Variant, vocab: Vocabulary)
     noises = adaptive.noises_of(descs)
     for i in np.flatnonzero(np.isnan(noises)):  # saved before descriptions recorded it: the same measure
         path, sha = folder.files[i]
-        noises[i] = displacement_correlation(load_variant(str(path), sha, variant))
+        with contextlib.suppress(InvalidMeshError, ValueError):  # unreadable now: unknown, weighed as clean
+            noises[i] = displacement_correlation(load_variant(str(path), sha, variant))
     return fused, np.stack([shape_dna(d.eigenvalues) for d in descs]), adaptive.rims_of(descs), noises
 
 

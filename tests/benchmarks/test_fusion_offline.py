@@ -21,7 +21,7 @@ def _description(rng: np.random.Generator, centre: float) -> ShapeDescription:
     hks[:, [19, 39, 59, 79]] = centre + 0.05 * rng.random((n, 4))  # run5's four time scales
     eigenvalues = np.concatenate([[0.0], np.cumsum(1 + centre + 0.01 * rng.random(40))])
     return ShapeDescription(hks=hks, weights=np.full(n, 1 / n, np.float32), keypoints=np.ones(n, bool),
-                            eigenvalues=eigenvalues, input_vertices=n)
+                            eigenvalues=eigenvalues, input_vertices=n, input_noise=0.8)
 
 
 def test_it_prints_every_rule_per_column_and_skips_what_is_not_cached(tmp_path: Path, capsys) -> None:

@@ -238,7 +238,8 @@ def by_stages(mesh: Mesh, p: DescribeParams, flt: KeypointFilter | None = None) 
     local = local_signature(spectrum, work.vertices, work.faces, mass.diagonal(), rim, LOCAL)
     return ShapeDescription(hks=hks_mod.normalize(raw).astype(np.float32),
                             weights=mass.diagonal().astype(np.float32), keypoints=mask,
-                            eigenvalues=spectrum.eigenvalues, input_vertices=mesh.n_vertices, local=local)
+                            eigenvalues=spectrum.eigenvalues, input_vertices=mesh.n_vertices, local=local,
+                            input_noise=displacement_correlation(mesh))
 
 
 def same(a: ShapeDescription, b: ShapeDescription) -> bool:
