@@ -41,7 +41,8 @@ SCREEN_KEEP = 2  # ... and the best this many of each handedness go on (the 8 si
 SCREEN_KEEP_EXACT = 4  # ... or this many when the face counts allow the same triangles (all 8 kept)
 MIRROR_MARGIN = 0.8  # an improper fit wins only when its ICP cost is 20 % lower
 REFINE = 2  # hypotheses of each handedness polished on FINE_POINTS when the quick decision is not made
-FINE_SETTLE = 5  # ... of which the best of each handedness, after this many rounds, goes on alone
+FINE_SETTLE = 5  # ... of which the best of each handedness, after this many rounds ...
+SETTLE_POINTS = 256  # ... on this many points (the quick fit's), goes on alone on FINE_POINTS
 QUICK_POINTS = 256  # the best fit polished (QUICK_ROUNDS) and the distances measured on this many first ...
 QUICK_ROUNDS = 8
 QUICK_MARGIN = 4.0  # ... and four times past every tolerance there is `similar` without more work
@@ -188,12 +189,13 @@ def _fine_fit(
 ) -> tuple[float, Similarity, list[Similarity]]:
     """_polished() on FINE_POINTS of a's samples from the turns of the rough fits (the centroids
     already meet at 0); of more than 2 of them, only the best of each handedness after FINE_SETTLE
-    rounds goes on (both samples' verdicts unchanged: docs/variants.md). Also the best final fit of
-    each handedness, the chosen one first."""
+    rounds on SETTLE_POINTS goes on (the three samples' verdicts unchanged: docs/variants.md). Also
+    the best final fit of each handedness, the chosen one first."""
     fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
     starts, rounds = [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough], ICP_ITERATIONS
     if len(starts) > 2:
-        fits, costs = icp_batch(fine, b.normalised_tree, b.normalised_samples, starts, FINE_SETTLE,
+        settle = a.normalised_samples[:: max(1, len(a.normalised_samples) // SETTLE_POINTS)]
+        fits, costs = icp_batch(settle, b.normalised_tree, b.normalised_samples, starts, FINE_SETTLE,
                                 with_scale=True)
         ranked = sorted(zip(costs.tolist(), fits, strict=True), key=lambda f: f[0])
         starts = [next(f for _, f in ranked if f.mirrored == m) for m in (False, True)
