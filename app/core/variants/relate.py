@@ -34,7 +34,10 @@ CHAMFER_MAX = 0.006  # same surface: mean surface distance below 0.6 % of the di
 HAUSDORFF_MAX = 0.06  # ... and no point farther than 6 % (a punched hole, a decimated corner)
 COVER_TOLERANCE = 0.01  # a sample is "covered" by the other surface within 1 % of the diagonal
 IDENTITY_TOL = 1e-4  # rotation angle (rad), |log scale| and translation / diagonal read as "none"
-COARSE_POINTS = 64  # ICP on a subsample to rank the hypotheses, then more points on the best
+COARSE_POINTS = 64  # ICP on a subsample to rank the hypotheses, then more points on the best ...
+# ... or on this many when the face counts allow the same triangles: those are looked for from the
+# coarse fits near the best, and a renumbered similarity of the held-out sample was missed at 64
+COARSE_POINTS_EXACT = 128
 FINE_POINTS = 1024
 SCREEN_POINTS = 64  # past 2 SCREEN_KEEP hypotheses, a 3-round ICP on this many points screens them ...
 SCREEN_KEEP = 2  # ... and the best this many of each handedness go on (the 8 sign choices: 4) ...
@@ -265,7 +268,7 @@ def _hypotheses(a: Prepared, b: Prepared, keep: int) -> list[tuple[float, Simila
         order = np.argsort(costs)
         starts = [fits[i] for i in order if not fits[i].mirrored][:keep] + [
             fits[i] for i in order if fits[i].mirrored][:keep]
-    coarse = pts[:: max(1, len(pts) // COARSE_POINTS)]
+    coarse = pts[:: max(1, len(pts) // (COARSE_POINTS_EXACT if keep >= SCREEN_KEEP_EXACT else COARSE_POINTS))]
     fits, costs = icp_batch(coarse, b.normalised_tree, b.normalised_samples, starts, iterations=10)
     ranked = list(zip(costs.tolist(), fits, strict=True))
     ranked.sort(key=lambda r: (r[1].mirrored, r[0]))  # proper first: a symmetric shape is not "mirrored"
