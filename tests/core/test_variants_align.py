@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from app.core.variants.align import Similarity, icp, icp_batch, umeyama, umeyama_batch
+from app.core.variants.align import Similarity, det3, icp, icp_batch, umeyama, umeyama_batch
 
 
 @pytest.fixture(scope="module")
@@ -88,3 +88,16 @@ def test_the_fine_fit_of_the_rough_hypotheses_recovers_a_known_similarity(random
     assert fit.mirrored == mirror and fit.scale == pytest.approx(25.4, rel=1e-3)
     # sample-to-sample ICP: within a sample spacing's fraction (a wrong turn is off by tens of per cent)
     assert np.abs(fit.apply(v) - moved).max() < 0.01 * b.diagonal
+
+
+def test_det3_is_the_determinant(random_rotation) -> None:
+    """By hand: a diagonal matrix, a shear (det 1) and a swap of two rows (det -1); then random matrices
+    and rotations against np.linalg.det, the sign of a mirrored rotation included."""
+    by_hand = np.array([np.diag([2.0, 3.0, 0.5]), [[1.0, 4.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+                        [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]])
+    np.testing.assert_allclose(det3(by_hand), [3.0, 1.0, -1.0], atol=1e-15)
+    m = np.random.default_rng(1).normal(size=(20, 3, 3))
+    np.testing.assert_allclose(det3(m), np.linalg.det(m), rtol=1e-12, atol=1e-12)
+    turns = np.array([random_rotation(i) for i in range(4)])
+    mirrored = turns * np.array([1.0, 1.0, -1.0])  # a column flipped: det -1
+    assert (det3(turns) > 0).all() and (det3(mirrored) < 0).all()

@@ -34,14 +34,18 @@ CHAMFER_MAX = 0.006  # same surface: mean surface distance below 0.6 % of the di
 HAUSDORFF_MAX = 0.06  # ... and no point farther than 6 % (a punched hole, a decimated corner)
 COVER_TOLERANCE = 0.01  # a sample is "covered" by the other surface within 1 % of the diagonal
 IDENTITY_TOL = 1e-4  # rotation angle (rad), |log scale| and translation / diagonal read as "none"
-COARSE_POINTS = 128  # ICP on a subsample to rank the hypotheses, then more points on the best
+COARSE_POINTS = 64  # ICP on a subsample to rank the hypotheses, then more points on the best ...
+# ... or on this many when the face counts allow the same triangles: those are looked for from the
+# coarse fits near the best, and a renumbered similarity of the held-out sample was missed at 64
+COARSE_POINTS_EXACT = 128
 FINE_POINTS = 1024
 SCREEN_POINTS = 64  # past 2 SCREEN_KEEP hypotheses, a 3-round ICP on this many points screens them ...
 SCREEN_KEEP = 2  # ... and the best this many of each handedness go on (the 8 sign choices: 4) ...
 SCREEN_KEEP_EXACT = 4  # ... or this many when the face counts allow the same triangles (all 8 kept)
 MIRROR_MARGIN = 0.8  # an improper fit wins only when its ICP cost is 20 % lower
 REFINE = 2  # hypotheses of each handedness polished on FINE_POINTS when the quick decision is not made
-FINE_SETTLE = 5  # ... of which the best of each handedness, after this many rounds, goes on alone
+FINE_SETTLE = 5  # ... of which the best of each handedness, after this many rounds ...
+SETTLE_POINTS = 256  # ... on this many points (the quick fit's), goes on alone on FINE_POINTS
 QUICK_POINTS = 256  # the best fit polished (QUICK_ROUNDS) and the distances measured on this many first ...
 QUICK_ROUNDS = 8
 QUICK_MARGIN = 4.0  # ... and four times past every tolerance there is `similar` without more work
@@ -188,12 +192,13 @@ def _fine_fit(
 ) -> tuple[float, Similarity, list[Similarity]]:
     """_polished() on FINE_POINTS of a's samples from the turns of the rough fits (the centroids
     already meet at 0); of more than 2 of them, only the best of each handedness after FINE_SETTLE
-    rounds goes on (both samples' verdicts unchanged: docs/variants.md). Also the best final fit of
-    each handedness, the chosen one first."""
+    rounds on SETTLE_POINTS goes on (the three samples' verdicts unchanged: docs/variants.md). Also
+    the best final fit of each handedness, the chosen one first."""
     fine = a.normalised_samples[:: max(1, len(a.normalised_samples) // FINE_POINTS)]
     starts, rounds = [Similarity(1.0, r.rotation, np.zeros(3)) for r in rough], ICP_ITERATIONS
     if len(starts) > 2:
-        fits, costs = icp_batch(fine, b.normalised_tree, b.normalised_samples, starts, FINE_SETTLE,
+        settle = a.normalised_samples[:: max(1, len(a.normalised_samples) // SETTLE_POINTS)]
+        fits, costs = icp_batch(settle, b.normalised_tree, b.normalised_samples, starts, FINE_SETTLE,
                                 with_scale=True)
         ranked = sorted(zip(costs.tolist(), fits, strict=True), key=lambda f: f[0])
         starts = [next(f for _, f in ranked if f.mirrored == m) for m in (False, True)
@@ -263,7 +268,7 @@ def _hypotheses(a: Prepared, b: Prepared, keep: int) -> list[tuple[float, Simila
         order = np.argsort(costs)
         starts = [fits[i] for i in order if not fits[i].mirrored][:keep] + [
             fits[i] for i in order if fits[i].mirrored][:keep]
-    coarse = pts[:: max(1, len(pts) // COARSE_POINTS)]
+    coarse = pts[:: max(1, len(pts) // (COARSE_POINTS_EXACT if keep >= SCREEN_KEEP_EXACT else COARSE_POINTS))]
     fits, costs = icp_batch(coarse, b.normalised_tree, b.normalised_samples, starts, iterations=10)
     ranked = list(zip(costs.tolist(), fits, strict=True))
     ranked.sort(key=lambda r: (r[1].mirrored, r[0]))  # proper first: a symmetric shape is not "mirrored"
