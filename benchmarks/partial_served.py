@@ -20,8 +20,11 @@ Prints per set: mAP and NN of the global ranking and of the served one, the shar
 model of their class among the candidates, the wrong first hits by class, the calibration (each piece
 against its own whole model: forward, reverse and the scale's kept share against the true kept share),
 and the time of the partial stage per piece; for the whole models as queries (each against the others):
-how many are taken for pieces, and mAP / NN of the ranking they get. `--ideas` adds rankings of the same
-candidates from benchmarks.partial_ideas' tables (the mutual share plus the vote).
+how many are taken for pieces, and mAP / NN of the ranking they get. The same candidates are also
+ordered by other scores of the same matches (ALTERNATIVES: the mutual share served before the vote, the
+distance alone, other vote weights), per piece in --json for paired comparisons; `--ideas` adds
+rankings from benchmarks.partial_ideas' float32 tables (a check of the service's numbers, and votes
+over other numbers of neighbours).
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ import csv
 import json
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
@@ -40,7 +44,7 @@ from unittest import mock
 import numpy as np
 
 from app.core.partial import LocalSignature
-from app.core.partial_match import CAP, match_many
+from app.core.partial_match import CAP, PartialMatch, match_many
 from app.core.pipeline import LOCAL, DescribeParams, ShapeDescription
 from app.core.vocabulary import Vocabulary
 from app.datasets.folder import LabelledFile, read_labelled_folder
@@ -82,6 +86,7 @@ class Served:
     vectors: np.ndarray
     signatures: list[LocalSignature | None]
     seconds: list[float] = field(default_factory=list)  # the partial stage's wall time per piece
+    last: tuple[np.ndarray, list[Any]] = (np.zeros(0, np.int64), [])  # the last piece's candidates, matches
 
     def global_order(self, vector: np.ndarray, leave_out: int | None = None) -> np.ndarray:
         dist = np.abs(self.vectors - vector).sum(axis=1)
@@ -97,13 +102,44 @@ class Served:
         hits = [search_mod.Hit(SimpleNamespace(id=int(j)), 0.0, r + 1)  # type: ignore[arg-type]
                 for r, j in enumerate(wanted)]
         sigs = self.signatures
+        score = partial_mod.score
+
+        def keep(ctx: Any, query: Any, model_ids: Any) -> list[Any]:  # the candidates' matches, kept
+            found = score(ctx, query, model_ids)
+            self.last = (np.asarray(model_ids, dtype=np.int64), found)
+            return found
+
+        # MUTUAL in the service only asks match_many for the mutual share (the score reads the core's
+        # weight): the share the ranking served before the vote read, for ALTERNATIVES
         with mock.patch.object(partial_mod, "local_of", lambda ctx, model_id: sigs[model_id]), \
                 mock.patch.object(partial_mod, "COARSE_BUDGET_S", float("inf")), \
-                mock.patch.object(partial_mod, "SCORE_BUDGET_S", float("inf")):
+                mock.patch.object(partial_mod, "SCORE_BUDGET_S", float("inf")), \
+                mock.patch.object(partial_mod, "MUTUAL", 1.0), mock.patch.object(partial_mod, "score", keep):
             t = time.perf_counter()
             out = search_mod._scored(None, description, hits, partial_mod.RERANK, True)  # type: ignore[arg-type]
             self.seconds.append(time.perf_counter() - t)
         return np.array([h.model.id for h in out], dtype=np.int64), out
+
+    def alternatives(self) -> dict[str, np.ndarray]:
+        """The last piece's candidates ordered by each of ALTERNATIVES (as _scored orders: unscored
+        last, ties in global order)."""
+        ids, found = self.last
+        out = {}
+        for name, key in ALTERNATIVES.items():
+            value = [key(m) if m is not None else float("inf") for m in found]
+            out[name] = ids[sorted(range(len(ids)), key=lambda j: (value[j], j))]
+        return out
+
+
+# other scores of the same matches: the mutual share's (served 2026-12-03 to 12-04), the distance alone,
+# the vote at other weights (in CAPs)
+ALTERNATIVES: dict[str, Callable[[PartialMatch], float]] = {
+    "mutual 1 (before)": lambda m: m.distance - CAP * m.mutual,
+    "distance alone": lambda m: m.distance,
+    "vote x0.25": lambda m: m.distance - 0.25 * CAP * m.vote,
+    "vote x1": lambda m: m.distance - CAP * m.vote,
+    "mutual 1 + vote x0.5": lambda m: m.distance - CAP * m.mutual - 0.5 * CAP * m.vote,
+}
 
 
 def full_ranking(head: np.ndarray, order: np.ndarray) -> np.ndarray:
@@ -141,6 +177,7 @@ def run_set(name: str, qdir: Path, served: Served, labels: np.ndarray, mnames: l
     own, fwd_same, fwd_other, pieces = [], [], [], 0
     served.seconds.clear()
     extra: dict[str, list[tuple[float, float]]] = {}
+    per_piece: list[dict[str, Any]] = []
     for r, d in zip(chosen, descs, strict=True):
         qname = r.path.relative_to(qdir.resolve()).as_posix()
         order = served.global_order(vocab.encode(d).astype(np.float64))
@@ -167,9 +204,18 @@ def run_set(name: str, qdir: Path, served: Served, labels: np.ndarray, mnames: l
         for h in hits:
             if h.forward is not None and int(h.model.id) != own_j:
                 (fwd_same if labels[h.model.id] == r.label else fwd_other).append(h.forward)
+        record: dict[str, Any] = {"file": qname, "label": r.label, "kept": kept[qname],
+                                  "ap": res["s_ap"][-1], "first": str(ranked[0])}
+        for key, head in served.alternatives().items():
+            alt = labels[full_ranking(head, order)]
+            value = (100 * average_precision(alt, r.label, total), float(alt[0] == r.label))
+            extra.setdefault(key, []).append(value)
+            record[key] = value
         if ideas:
             for key, value in idea_scores(d, served, cand, order, labels, r.label, total).items():
                 extra.setdefault(key, []).append(value)
+                record[key] = value
+        per_piece.append(record)
     out: dict[str, Any] = {
         "set": name, "folder": str(qdir), "pieces": len(chosen), "taken_for_pieces": pieces,
         "global_map": float(np.mean(res["g_ap"])), "global_nn": float(np.mean(res["g_nn"])),
@@ -182,6 +228,7 @@ def run_set(name: str, qdir: Path, served: Served, labels: np.ndarray, mnames: l
         "forward_other_class": float(np.mean(fwd_other)) if fwd_other else float("nan"),
         "ideas": {k: [float(np.mean([a for a, _ in v])), float(np.mean([n for _, n in v]))]
                   for k, v in extra.items()},
+        "per_piece": per_piece,
     }
     print_set(out)
     return out
@@ -210,14 +257,15 @@ def idea_scores(d: ShapeDescription, served: Served, cand: np.ndarray, order: np
 
 
 def _ideas() -> dict[str, Any]:
+    """Rankings of the served candidates from the tables (float32): the distance alone, the mutual
+    share (served until the vote), the vote (weight in CAPs, top) with and without the mutual share."""
     from benchmarks import partial_ideas as ideas
 
-    return {"mutual 1 (tables)": ideas._mutual(1.0), "mutual 2": ideas._mutual(2.0),
-            "served+vote 10 0.5": ideas._vote(10, 0.5),
-            "mutual 1 + vote 10 0.25": ideas._mutual_vote(1.0, 10, 0.25),
-            "mutual 1 + vote 10 0.5": ideas._mutual_vote(1.0, 10, 0.5),
-            "mutual 1 + vote 10 1": ideas._mutual_vote(1.0, 10, 1.0),
-            "mutual 1 + vote 5 0.5": ideas._mutual_vote(1.0, 5, 0.5)}
+    return {"distance alone": ideas.r_served, "mutual 1": ideas._mutual(1.0),
+            "vote 10 x0.25": ideas._vote(10, 0.25), "vote 10 x0.5": ideas._vote(10, 0.5),
+            "vote 10 x1": ideas._vote(10, 1.0), "vote 5 x0.5": ideas._vote(5, 0.5),
+            "vote 20 x0.5": ideas._vote(20, 0.5),
+            "mutual 1 + vote 10 x0.5": ideas._mutual_vote(1.0, 10, 0.5)}
 
 
 IDEAS = _ideas()
@@ -281,9 +329,9 @@ def main(argv: list[str] | None = None) -> int:
     for name, qdir in sets:
         report["sets"].append(run_set(name, qdir, served, labels, mnames, a.per_class, a.split,
                                       a.cache_dir, a.workers, a.ideas))
-    if a.json:
-        a.json.parent.mkdir(parents=True, exist_ok=True)
-        a.json.write_text(json.dumps(report, indent=1))
+        if a.json:  # after every set: a long run interrupted keeps what it measured
+            a.json.parent.mkdir(parents=True, exist_ok=True)
+            a.json.write_text(json.dumps(report, indent=1))
     return 0
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from app.core.partial import LocalSignature
-from app.core.partial_match import match_many
+from app.core.partial_match import CAP, match_many
 from app.core.pipeline import LOCAL, ShapeDescription
 from app.datasets.folder import LabelledFile
 from app.services import partial as partial_mod
@@ -60,6 +60,13 @@ def test_a_piece_is_ordered_by_the_service_score_of_every_model():
     assert ranked[0] == 4
     assert all(h.partial and h.forward is not None for h in hits)
     assert len(served.seconds) == 1
+    found = match_many(query, models, LOCAL, mutual=True)
+    alt = served.alternatives()  # other scores of the same matches, the same candidates
+    position = order.tolist().index
+    assert alt["distance alone"].tolist() == sorted(range(6), key=lambda j: (found[j].distance, position(j)))
+    assert alt["mutual 1 (before)"].tolist() == sorted(
+        range(6), key=lambda j: (found[j].distance - CAP * found[j].mutual, position(j)))
+    assert served.last[1][0].mutual > 0  # the mutual share was computed for the "before" ranking
 
 
 def test_a_model_without_signature_follows_the_scored_ones():
