@@ -12,7 +12,8 @@ holding the pieces' and models' descriptions (benchmarks.partial_served fills it
 each piece's 10 hits over HTTP are the ones benchmarks.partial_served ranks first. `--fill N` then adds
 synthetic ready models with vectors (no description: they have no local signature) until the index
 holds N, and times the pieces again: what the global search and the hit records cost at that size (their
-partial stage still scores only the real models: see docs/partial.md for what scales).
+partial stage still scores only the real models: see docs/partial.md for what scales). `--data-dir`
+reuses the data directory of an earlier run (its ingest jobs resume; no upload).
 """
 
 from __future__ import annotations
@@ -82,6 +83,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--pieces", dest="count", type=int, default=30)
     p.add_argument("--fill", type=int, default=0)
     p.add_argument("--cache-dir", type=Path, default=None)
+    p.add_argument("--data-dir", type=Path, default=None,
+                   help="a data directory a run of this benchmark ingested SRC into (resumes its jobs)")
     a = p.parse_args(argv)
     src, qdir = _folder(a.src), _folder(a.pieces)
     rows = read_labelled_folder(src)
@@ -89,14 +92,18 @@ def main(argv: list[str] | None = None) -> int:
     pieces = [qrows[i] for i in sample(qrows, 1, "held")][: a.count]
     wholes = [rows[i] for i in sample(rows, 1, "held")][: a.count]
     tmp = Path(tempfile.mkdtemp(prefix="shapebag-partial-http-"))
+    data = a.data_dir or tmp / "data"
     port = free_port()
     base = f"http://127.0.0.1:{port}"
-    proc = start_server(tmp / "data", port, "faiss", tmp / "server.log")
+    proc = start_server(data, port, "faiss", tmp / "server.log")
     try:
-        ing = ingest(base, [(str(r.path), r.label) for r in rows])
-        print(f"ingested {ing['ready']}/{ing['meshes']} models over HTTP in {ing['wall_s']:.0f} s "
-              f"(2 embedded workers); server log {tmp / 'server.log'}")
+        if a.data_dir is None:
+            ing = ingest(base, [(str(r.path), r.label) for r in rows])
+            print(f"ingested {ing['ready']}/{ing['meshes']} models over HTTP in {ing['wall_s']:.0f} s "
+                  f"(2 embedded workers); server log {tmp / 'server.log'}")
         wait_until(lambda: httpx.get(f"{base}/readyz", timeout=10).status_code == 200, 300, "the index")
+        wait_until(lambda: httpx.get(f"{base}/readyz", timeout=10).json()["checks"]["indexed_models"]
+                   >= len(rows), 3000, f"{len(rows)} indexed models (the ingest jobs left)", every_s=5)
         with httpx.Client(base_url=base, timeout=120) as client:
             _post(client, pieces[0].path)  # warm: the first search loads the index and the pool
             for size in ([len(rows)] + ([a.fill] if a.fill > len(rows) else [])):

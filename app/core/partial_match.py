@@ -240,5 +240,6 @@ def votes(query: LocalSignature, found: Sequence[PartialMatch], params: LocalPar
     d = np.stack([m.nearest if m.nearest is not None else np.full(p, np.inf) for m in found], axis=1)
     rank = np.argsort(np.argsort(d, axis=1, kind="stable"), axis=1)  # (p, N) rank of each model per sample
     good = (rank < top) & np.isfinite(d)
-    area = np.stack([trusted_area(query, m.shift, params) for m in found], axis=1)  # (p, N)
+    by_shift = {shift: trusted_area(query, shift, params) for shift in {m.shift for m in found}}
+    area = np.stack([by_shift[m.shift] for m in found], axis=1)  # (p, N)
     return (area * good).sum(axis=0)
