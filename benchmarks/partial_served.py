@@ -261,11 +261,12 @@ def _ideas() -> dict[str, Any]:
     share (served until the vote), the vote (weight in CAPs, top) with and without the mutual share."""
     from benchmarks import partial_ideas as ideas
 
-    return {"distance alone": ideas.r_served, "mutual 1": ideas._mutual(1.0),
-            "vote 10 x0.25": ideas._vote(10, 0.25), "vote 10 x0.5": ideas._vote(10, 0.5),
-            "vote 10 x1": ideas._vote(10, 1.0), "vote 5 x0.5": ideas._vote(5, 0.5),
-            "vote 20 x0.5": ideas._vote(20, 0.5),
-            "mutual 1 + vote 10 x0.5": ideas._mutual_vote(1.0, 10, 0.5)}
+    return {"distance alone": ideas.r_served, "mutual 1": ideas._mutual(1.0), "mutual 2": ideas._mutual(2.0),
+            "vote 10 x0.5": ideas._vote(10, 0.5),
+            "mutual 1 + vote 10 x0.25": ideas._mutual_vote(1.0, 10, 0.25),
+            "mutual 1 + vote 10 x0.5": ideas._mutual_vote(1.0, 10, 0.5),
+            "mutual 1 + vote 10 x1": ideas._mutual_vote(1.0, 10, 1.0),
+            "mutual 1 + vote 5 x0.5": ideas._mutual_vote(1.0, 5, 0.5)}
 
 
 IDEAS = _ideas()
