@@ -9,10 +9,14 @@ lacks costs a bounded amount) wins; under it
   between grid steps by a parabola through the scores): the area of the model the matched part of the
   query stands for, over the model's area. Counting the model samples that some query sample matches
   would count both legs for one (the slopes are the same on symmetric parts); the scale does not.
-The score ranks candidates: the distance less MUTUAL x CAP x the mutual share, the query's trusted area
-whose nearest model sample has it as its own nearest query sample at the winning scale (a one-to-one
-match: a model whose samples look like many parts of the query, a spider's legs for an octopus's, draws
-many query samples to few of its own; measured in docs/partial.md).
+The score ranks candidates: the distance less VOTE x CAP x the vote share, the query's trusted area
+(at the winning scale) for which the model is among the VOTE_TOP nearest of all the candidates scored,
+sample by sample (votes(): it compares the candidates with each other, so it is set after match_many,
+over the candidates of one query). Near everywhere is not enough: a source is the best look-alike of
+many of the query's samples, a class whose limbs resemble everything's is not. MUTUAL x CAP x the
+mutual share (the query's trusted area whose nearest model sample has it as its own nearest query sample)
+was served before the vote; measured on all 30 SHREC'11 classes, the vote alone does better (weight 0:
+docs/partial.md).
 Forward and reverse are what a user reads, and `region` where: the share
 of the query's area each model sample matches under the winning scale (what the page's 3D view colours).
 `head` keeps a signature's first samples: a coarser farthest-point sample of the same shape, for a cheap
@@ -22,7 +26,7 @@ first pass over many models.
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -31,7 +35,9 @@ from app.core.partial import LocalParams, LocalSignature
 MIN_SLOPES = 4  # a sample with fewer trusted slopes than this sits on the rim: it is not compared
 TOLERANCE = 2e-3  # mean squared slope difference under which two samples match
 CAP = 4 * TOLERANCE  # one unmatched sample costs at most this: a missing part does not swamp the rest
-MUTUAL = 1.0  # weight of the mutual share in the score, in CAPs (0.5-4 gained alike: docs/partial.md)
+MUTUAL = 0.0  # weight of the mutual share in the score, in CAPs (1.0 before the vote: docs/partial.md)
+VOTE = 0.5  # weight of the vote share in the score, in CAPs (picked on SHREC'11's picking split)
+VOTE_TOP = 10  # a query sample votes for the candidates among its this many nearest
 
 
 @dataclass(frozen=True)
@@ -42,11 +48,15 @@ class PartialMatch:
     scale: float  # kept share the winning scale implies (1: the query is as large as the model)
     shift: int = 0  # the winning scale hypothesis (the query grid's window), which `region` reads
     mutual: float = 0.0  # the query's trusted area matched one-to-one at that scale (match_many(mutual=True))
+    vote: float = 0.0  # the query's trusted area that ranks this model among its VOTE_TOP nearest (votes())
+    # (p,) each query sample's nearest squared distance at that scale (inf: not trusted there), which
+    # votes() compares across candidates; None for a model with no trusted sample
+    nearest: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def score(self) -> float:
-        """What a re-ranking orders by, lower first: the distance less the mutual share's weight."""
-        return self.distance - MUTUAL * CAP * self.mutual
+        """What a re-ranking orders by, lower first: the distance less the mutual and vote shares' weights."""
+        return self.distance - MUTUAL * CAP * self.mutual - VOTE * CAP * self.vote
 
 
 @dataclass(frozen=True)
@@ -117,6 +127,7 @@ def match_many(query: LocalSignature, models: Sequence[LocalSignature], params: 
     starts = np.concatenate([[0], np.cumsum(counts[usable])[:-1]])
     scores = np.full((shifts, len(usable)), np.inf)
     forwards = np.zeros((shifts, len(usable)))
+    near = np.full((shifts, len(query.slopes), len(usable)), np.inf)  # per sample, per model
     for shift in range(shifts):
         qvalid = np.minimum(query.valid.astype(np.int64) - shift, width)
         rows = qvalid >= MIN_SLOPES
@@ -124,6 +135,7 @@ def match_many(query: LocalSignature, models: Sequence[LocalSignature], params: 
             continue
         d = _sq_distances(query.slopes[rows, shift:shift + width], qvalid[rows], stacked)  # (p', S)
         nearest = np.minimum.reduceat(d, starts, axis=1)  # (p', N) per model
+        near[shift, rows] = nearest
         qa = query.area[rows].astype(np.float64)
         qa = qa / qa.sum()
         scores[shift] = qa @ np.minimum(nearest, cap)
@@ -136,7 +148,7 @@ def match_many(query: LocalSignature, models: Sequence[LocalSignature], params: 
         fwd = float(min(forwards[best[c], c], 1.0))
         out[i] = PartialMatch(distance=float(min(finite[best[c], c], cap)), forward=fwd,
                               reverse=float(min(fwd * scale[c], 1.0)), scale=float(scale[c]),
-                              shift=int(best[c]))
+                              shift=int(best[c]), nearest=near[best[c], :, c].copy())
     if mutual:
         shares = mutual_shares(query, [models[i] for i in usable], [int(b) for b in best], params)
         for c, i in enumerate(usable):
@@ -205,3 +217,29 @@ def mutual_shares(query: LocalSignature, models: Sequence[LocalSignature], shift
         back = np.argmin(d, axis=0)  # (s',) each model sample's nearest query row
         out[i] = qa[back[ahead] == np.arange(len(ahead))].sum()
     return out
+
+
+def trusted_area(query: LocalSignature, shift: int, params: LocalParams) -> np.ndarray:
+    """(p,) the area share of each query sample trusted under scale hypothesis `shift` (0 elsewhere;
+    the trusted ones sum to 1, as a match weighs them)."""
+    qvalid = np.minimum(query.valid.astype(np.int64) - shift, params.slopes)
+    area = np.where(qvalid >= MIN_SLOPES, query.area.astype(np.float64), 0.0)
+    total = area.sum()
+    return area / total if total > 0 else area
+
+
+def votes(query: LocalSignature, found: Sequence[PartialMatch], params: LocalParams,
+          top: int = VOTE_TOP) -> np.ndarray:
+    """(len(found),) per match, the query's trusted area (at its winning scale) for which its model is
+    among the `top` nearest of all the matches' models, sample by sample: a model that is the best
+    look-alike of many of the query's samples, not merely near them all, as a source is (and a
+    class that shares parts with many, such as limbs, is not). Matches without `nearest` get 0."""
+    if not found:
+        return np.zeros(0)
+    p = len(query.slopes)
+    d = np.stack([m.nearest if m.nearest is not None else np.full(p, np.inf) for m in found], axis=1)
+    rank = np.argsort(np.argsort(d, axis=1, kind="stable"), axis=1)  # (p, N) rank of each model per sample
+    good = (rank < top) & np.isfinite(d)
+    by_shift = {shift: trusted_area(query, shift, params) for shift in {m.shift for m in found}}
+    area = np.stack([by_shift[m.shift] for m in found], axis=1)  # (p, N)
+    return (area * good).sum(axis=0)

@@ -6,7 +6,8 @@ of the global index and the COARSE_KEEP nearest by a coarse partial distance (th
 COARSE_POINTS samples) among the COARSE_SCAN nearest of the global index: the global ranking is what a
 piece defeats, and it left the piece's class out of its top 200 for 8 % of SHREC'11's 60-85 % pieces,
 the coarse pass for 1 % (docs/partial.md). The candidates are re-ranked by the local signatures'
-score (app.core.partial_match: the distance less the weight of the share matched one to one). A
+score (app.core.partial_match: the distance less the weight of the share of the query for which the
+candidate is among the VOTE_TOP nearest of the candidates scored). A
 closed query keeps the global ranking exactly. Every hit gets
 forward and reverse scores either way.
 Models described before the local signature existed (description format < 3) have none: they get no
@@ -21,10 +22,11 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 from app.core.partial import LocalSignature
-from app.core.partial_match import PartialMatch, Region, head, match_many
+from app.core.partial_match import MUTUAL, PartialMatch, Region, head, match_many, votes
 from app.core.partial_match import regions as regions_of
 from app.core.pipeline import LOCAL, load_local
 from app.services.context import ServiceContext
@@ -93,7 +95,7 @@ def is_partial(query: LocalSignature | None, requested: bool | None) -> bool:
 def _matches(ctx: ServiceContext, query: LocalSignature, model_ids: Sequence[int],
              budget_s: float, mutual: bool = False) -> list[PartialMatch | None]:
     """One PartialMatch per model (None: no signature, or not reached within budget_s; the first
-    CHUNK are always scored). mutual: with the mutual share, which the re-ranking's score reads."""
+    CHUNK are always scored). mutual: with the mutual share (the score reads it when MUTUAL > 0)."""
     out: list[PartialMatch | None] = [None] * len(model_ids)
     deadline = time.monotonic() + budget_s
     for start in range(0, len(model_ids), CHUNK):
@@ -126,7 +128,19 @@ def score(ctx: ServiceContext, query: LocalSignature | None,
     SCORE_BUDGET_S)."""
     if query is None:
         return [None] * len(model_ids)
-    return _matches(ctx, query, model_ids, SCORE_BUDGET_S, mutual=True)
+    return _voted(query, _matches(ctx, query, model_ids, SCORE_BUDGET_S, mutual=MUTUAL > 0))
+
+
+def _voted(query: LocalSignature, found: list[PartialMatch | None]) -> list[PartialMatch | None]:
+    """The matches with their vote share among the scored candidates (the score reads it)."""
+    have = [j for j, m in enumerate(found) if m is not None]
+    shares = votes(query, [m for m in found if m is not None], LOCAL)
+    out = list(found)
+    for j, share in zip(have, shares, strict=True):
+        m = found[j]
+        assert m is not None
+        out[j] = replace(m, vote=float(share))
+    return out
 
 
 def regions(ctx: ServiceContext, query: LocalSignature | None, model_ids: Sequence[int],

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import trimesh
@@ -19,7 +21,20 @@ from app.core.partial import (
     rim_distance,
     rim_length,
 )
-from app.core.partial_match import CAP, MUTUAL, head, match_many, mutual_shares, region, regions
+from app.core.partial_match import (
+    CAP,
+    MIN_SLOPES,
+    MUTUAL,
+    VOTE,
+    PartialMatch,
+    head,
+    match_many,
+    mutual_shares,
+    region,
+    regions,
+    trusted_area,
+    votes,
+)
 from app.core.resolution import normalize_scale
 from app.core.spectrum import Spectrum, smallest_eigenpairs
 
@@ -255,7 +270,7 @@ def test_a_pieces_region_sums_to_its_forward_score():
     assert coarse.vertex is not None and coarse.vertex.tolist() == model.vertex[:8].tolist()
 
 
-def test_the_mutual_share_counts_one_to_one_matches_and_lowers_the_score():
+def test_the_mutual_share_counts_one_to_one_matches_and_weighs_in_the_score_by_MUTUAL():
     """By hand: query samples q0 (area 0.7, equal to model sample m0) and q1 (0.3, far from both). Both
     have m0 as nearest; m0's nearest query sample is q0, m1's is q0 too (1 against 36): only q0's match
     is one to one, so the mutual share is 0.7 and the score 0.3 CAP - MUTUAL x CAP x 0.7."""
@@ -276,3 +291,42 @@ def test_the_mutual_share_counts_one_to_one_matches_and_lowers_the_score():
     twice = LocalSignature(slopes=np.array([[0.0] * width, [0.0] * width, [4.0] * width], np.float32),
                            area=np.full(3, 1 / 3, np.float32), valid=np.full(3, width, np.int16), rim=0.0)
     assert mutual_shares(query, [twice, model], [0, 0], PARAMS) == pytest.approx([1.0, 0.7])
+
+
+def test_votes_count_the_query_area_for_which_a_model_is_among_the_nearest():
+    """By hand, one scale hypothesis: query samples q0 (area 0.6) and q1 (0.4); model A equals q0 and is
+    far from q1, model B is near both but equal to neither, model C equals q1. Per sample the nearest
+    models are q0: A, B, C; q1: C, B, A. With top 1, A gets q0's 0.6 and C q1's 0.4; with top 2, B is
+    among both samples' two nearest: 1.0, as the look-alike of everything a source need not be."""
+    width = PARAMS.slopes + PARAMS.shifts - 1
+    q = LocalSignature(slopes=np.array([[0.0] * width, [2.0] * width], np.float32),
+                       area=np.array([0.6, 0.4], np.float32), valid=np.full(2, width, np.int16), rim=1.0)
+
+    def model(*rows: float) -> LocalSignature:
+        return LocalSignature(slopes=np.array([[r] * width for r in rows], np.float32),
+                              area=np.full(len(rows), 1 / len(rows), np.float32),
+                              valid=np.full(len(rows), width, np.int16), rim=0.0)
+
+    a, b, c = model(0.0, -3.0), model(0.9, 1.1), model(2.0, 5.0)
+    found = match_many(q, [a, b, c], PARAMS)
+    assert [m.shift for m in found] == [0, 0, 0]
+    assert votes(q, found, PARAMS, top=1) == pytest.approx([0.6, 0.0, 0.4])
+    assert votes(q, found, PARAMS, top=2) == pytest.approx([0.6, 1.0, 0.4])
+    assert votes(q, found, PARAMS, top=3) == pytest.approx([1.0, 1.0, 1.0])
+    voted = replace(found[0], vote=0.6)
+    assert voted.score == pytest.approx(found[0].score - VOTE * CAP * 0.6)
+
+
+def test_a_sample_untrusted_at_a_models_scale_gives_it_no_vote():
+    """q1 keeps only MIN_SLOPES slopes: trusted at shift 0, not at shift 1. A model matched at shift 1
+    gets no vote from it, and the trusted area is renormalised over the samples trusted there."""
+    width = PARAMS.slopes + PARAMS.shifts - 1
+    q = LocalSignature(slopes=np.zeros((2, width), np.float32), area=np.array([0.5, 0.5], np.float32),
+                       valid=np.array([width, MIN_SLOPES], np.int16), rim=1.0)
+    assert trusted_area(q, 0, PARAMS) == pytest.approx([0.5, 0.5])
+    assert trusted_area(q, 1, PARAMS) == pytest.approx([1.0, 0.0])
+    near = PartialMatch(distance=0.0, forward=1.0, reverse=1.0, scale=1.0, shift=1,
+                        nearest=np.array([0.0, np.inf]))
+    none = PartialMatch(distance=CAP, forward=0.0, reverse=0.0, scale=1.0)  # no trusted sample: no nearest
+    assert votes(q, [near, none], PARAMS, top=1) == pytest.approx([1.0, 0.0])
+    assert votes(q, [], PARAMS).shape == (0,)

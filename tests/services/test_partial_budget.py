@@ -18,11 +18,12 @@ def scored(monkeypatch):
     monkeypatch.setattr(partial._CACHE, "get", lambda path: None if path == "no-sig-7" else f"sig-{path}")
 
     def fake_match(query, models, params, mutual=False):
-        assert mutual  # the full scoring computes the mutual share its ranking reads
+        assert mutual == (partial.MUTUAL > 0)  # the mutual share only when the score reads it
         calls.append(len(models))
         return [f"match-{m}" for m in models]
 
     monkeypatch.setattr(partial, "match_many", fake_match)
+    monkeypatch.setattr(partial, "_voted", lambda query, found: found)  # fake matches have no samples
     ctx = SimpleNamespace(blobs=SimpleNamespace(description_path=lambda i: f"no-sig-{i}" if i == 7 else i))
 
     def run(budget_s: float) -> tuple[list, list[int]]:
@@ -75,3 +76,29 @@ def test_candidates_are_the_global_head_and_the_coarse_nearest_in_global_order(m
     heads.clear()
     assert partial.candidates(ctx, query, ids[:10]) == list(range(10)) and heads == []
     assert partial.candidates(ctx, None, ids) == list(range(10))
+
+
+def test_the_scored_candidates_carry_their_vote_among_the_scored_ones(monkeypatch):
+    """Real matches: each query sample votes for its VOTE_TOP nearest scored candidates; one without a
+    signature is unscored and takes no vote. Candidate 3 equals the query: every sample votes for it."""
+    from app.core.partial_match import VOTE_TOP
+    from app.core.pipeline import LOCAL
+
+    rng = np.random.default_rng(0)
+    width = LOCAL.slopes + LOCAL.shifts - 1
+    query = LocalSignature(slopes=rng.normal(size=(20, width)).astype(np.float32),
+                           area=np.full(20, 0.05, np.float32), valid=np.full(20, width, np.int16), rim=1.0)
+    sigs = {i: LocalSignature(slopes=rng.normal(size=(20, LOCAL.slopes)).astype(np.float32),
+                              area=np.full(20, 0.05, np.float32), valid=np.full(20, LOCAL.slopes, np.int16),
+                              rim=0.0) for i in range(VOTE_TOP + 5)}
+    sigs[3] = LocalSignature(slopes=query.slopes[:, :LOCAL.slopes].copy(), area=query.area,
+                             valid=np.full(20, LOCAL.slopes, np.int16), rim=0.0)
+    del sigs[5]
+    monkeypatch.setattr(partial._CACHE, "get", lambda path: sigs.get(path))
+    ctx = SimpleNamespace(blobs=SimpleNamespace(description_path=lambda i: i))
+    found = partial.score(ctx, query, list(range(VOTE_TOP + 5)))
+    assert found[5] is None
+    assert found[3] is not None and found[3].vote == pytest.approx(1.0)
+    shares = [m.vote for m in found if m is not None]
+    assert sum(shares) == pytest.approx(VOTE_TOP)  # each sample's unit of area goes to VOTE_TOP models
+    assert min(found, key=lambda m: m.score if m is not None else np.inf) is found[3]

@@ -1,0 +1,127 @@
+"""The time of a piece through HTTP: a real server over the 600 SHREC'11 models, pieces POSTed to /search.
+
+    python -m benchmarks.partial_http SRC PIECES [--pieces 30] [--fill 0] [--cache-dir .cache/describe]
+
+Starts the service (benchmarks.service.start_server: uvicorn, 2 embedded workers, the shipped
+vocabulary) on a temporary data directory, ingests every model of the labelled folder SRC over HTTP
+(POST /models), then POSTs `--pieces` pieces of the folder PIECES (one a class, the first of each class
+outside the picking split, as benchmarks.partial_served samples them) and as many whole models to
+POST /search (k = 10, partial detection automatic), one at a time, and prints per kind the client's wall
+time (p50 / p95 / max) and the server's split (describe, encode, search, partial). With --cache-dir
+holding the pieces' and models' descriptions (benchmarks.partial_served fills it), it also checks that
+each piece's 10 hits over HTTP are the ones benchmarks.partial_served ranks first. `--fill N` then adds
+synthetic ready models with vectors (no description: they have no local signature) until the index
+holds N, and times the pieces again: what the global search and the hit records cost at that size (their
+partial stage still scores only the real models: see docs/partial.md for what scales). `--data-dir`
+reuses the data directory of an earlier run (its ingest jobs resume; no upload).
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+
+from app.datasets.folder import LabelledFile, read_labelled_folder
+from benchmarks.partial_served import sample
+from benchmarks.partial_spectra import _folder
+from benchmarks.service import fill_index, free_port, ingest, start_server, stop_server, wait_until
+
+
+def _post(client: httpx.Client, path: Path) -> tuple[float, dict[str, Any]]:
+    t = time.perf_counter()
+    r = client.post("/search", files={"file": (path.name, path.read_bytes())}, data={"k": "10"})
+    r.raise_for_status()
+    return time.perf_counter() - t, r.json()
+
+
+def _summary(name: str, walls: list[float], bodies: list[dict[str, Any]]) -> dict[str, Any]:
+    w = np.array(walls)
+    split = {key: float(np.median([b.get("seconds", {}).get(key, np.nan) for b in bodies]))
+             for key in ("describe", "encode", "search", "partial")}
+    out = {"kind": name, "queries": len(w), "p50_s": float(np.percentile(w, 50)),
+           "p95_s": float(np.percentile(w, 95)), "max_s": float(w.max()), "server_p50_s": split,
+           "partial_hits": int(sum(bool(b["data"]) and bool(b["data"][0].get("partial")) for b in bodies))}
+    print(f"  {name:6s} n {len(w):3d}  wall p50 {out['p50_s']:.3f} s  p95 {out['p95_s']:.3f} s  max "
+          f"{out['max_s']:.3f} s;  server p50: " + ", ".join(f"{k} {v:.3f}" for k, v in split.items())
+          + f";  answered as pieces {out['partial_hits']}")
+    return out
+
+
+def _agreement(pieces: list[LabelledFile], bodies: list[dict[str, Any]], src: Path,
+               cache_dir: Path) -> None:
+    """How many pieces' 10 hits over HTTP are benchmarks.partial_served's first 10, in order."""
+    from app.core.vocabulary import Vocabulary
+    from benchmarks.partial_rerank import VOCABULARY
+    from benchmarks.partial_served import Served, described
+
+    rows = read_labelled_folder(src)
+    descs = described(rows, cache_dir, 1, src.name)
+    vocab = Vocabulary.load(VOCABULARY)
+    served = Served(np.stack([vocab.encode(d) for d in descs]).astype(np.float64), [d.local for d in descs])
+    names = [r.path.stem for r in rows]
+    same, first = 0, 0
+    for d, body in zip(described(pieces, cache_dir, 1, "pieces"), bodies, strict=True):
+        ranked, _ = served.rank(d, served.global_order(vocab.encode(d).astype(np.float64)))
+        offline = [names[j] for j in ranked[:10]]
+        http = [h["name"] for h in body["data"]]
+        same += offline == http
+        first += offline[:1] == http[:1]
+    print(f"  HTTP hits equal to benchmarks.partial_served's: all 10 for {same}/{len(bodies)} pieces, "
+          f"the first for {first}/{len(bodies)}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("src")
+    p.add_argument("pieces")
+    p.add_argument("--pieces", dest="count", type=int, default=30)
+    p.add_argument("--fill", type=int, default=0)
+    p.add_argument("--cache-dir", type=Path, default=None)
+    p.add_argument("--data-dir", type=Path, default=None,
+                   help="a data directory a run of this benchmark ingested SRC into (resumes its jobs)")
+    a = p.parse_args(argv)
+    src, qdir = _folder(a.src), _folder(a.pieces)
+    rows = read_labelled_folder(src)
+    qrows = read_labelled_folder(qdir)
+    pieces = [qrows[i] for i in sample(qrows, 1, "held")][: a.count]
+    wholes = [rows[i] for i in sample(rows, 1, "held")][: a.count]
+    tmp = Path(tempfile.mkdtemp(prefix="shapebag-partial-http-"))
+    data = a.data_dir or tmp / "data"
+    port = free_port()
+    base = f"http://127.0.0.1:{port}"
+    proc = start_server(data, port, "faiss", tmp / "server.log")
+    try:
+        if a.data_dir is None:
+            ing = ingest(base, [(str(r.path), r.label) for r in rows])
+            print(f"ingested {ing['ready']}/{ing['meshes']} models over HTTP in {ing['wall_s']:.0f} s "
+                  f"(2 embedded workers); server log {tmp / 'server.log'}")
+        wait_until(lambda: httpx.get(f"{base}/readyz", timeout=10).status_code == 200, 300, "the index")
+        wait_until(lambda: httpx.get(f"{base}/readyz", timeout=10).json()["checks"]["indexed_models"]
+                   >= len(rows), 3000, f"{len(rows)} indexed models (the ingest jobs left)", every_s=5)
+        with httpx.Client(base_url=base, timeout=120) as client:
+            _post(client, pieces[0].path)  # warm: the first search loads the index and the pool
+            for size in ([len(rows)] + ([a.fill] if a.fill > len(rows) else [])):
+                if size > len(rows):
+                    fill_index(tmp / "data", size)
+                    wait_until(lambda s=size: client.get("/readyz").json()["checks"]["indexed_models"] >= s,
+                               600, f"{size} indexed models", every_s=2)
+                print(f"{size} models indexed; POST /search k=10, one at a time:")
+                piece = [_post(client, r.path) for r in pieces]
+                whole = [_post(client, r.path) for r in wholes]
+                _summary("piece", [w for w, _ in piece], [b for _, b in piece])
+                _summary("whole", [w for w, _ in whole], [b for _, b in whole])
+                if a.cache_dir is not None and size == len(rows):
+                    _agreement(pieces, [b for _, b in piece], src, a.cache_dir)
+    finally:
+        stop_server(proc)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
