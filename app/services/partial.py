@@ -133,12 +133,10 @@ def score(ctx: ServiceContext, query: LocalSignature | None,
 
 def _voted(query: LocalSignature, found: list[PartialMatch | None]) -> list[PartialMatch | None]:
     """The matches with their vote share among the scored candidates (the score reads it)."""
-    have = [j for j, m in enumerate(found) if m is not None]
-    shares = votes(query, [m for m in found if m is not None], LOCAL)
+    scored = [(j, m) for j, m in enumerate(found) if m is not None]
+    shares = votes(query, [m for _, m in scored], LOCAL)
     out = list(found)
-    for j, share in zip(have, shares, strict=True):
-        m = found[j]
-        assert m is not None
+    for (j, m), share in zip(scored, shares, strict=True):
         out[j] = replace(m, vote=float(share))
     return out
 
