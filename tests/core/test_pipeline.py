@@ -437,11 +437,13 @@ def test_a_description_round_trips_through_npz_bit_for_bit(tmp_path):
             "local_area", "local_rim", "local_slopes", "local_valid", "local_vertex", "weights"
         ]
         assert int(z["format"]) == DESCRIPTION_FORMAT == 3
-    assert again.input_noise == desc.input_noise == displacement_correlation(CIGAR)  # of the mesh as given
+    # of the mesh as given (NaN for the 42-vertex cigar: too few vertices to tell noise from shape)
+    assert np.array_equal(again.input_noise, desc.input_noise, equal_nan=True)
+    assert np.array_equal(desc.input_noise, displacement_correlation(CIGAR), equal_nan=True)
 
 
 def test_a_description_saved_before_the_input_noise_reads_it_as_unknown(tmp_path):
-    desc = describe(CIGAR, SMALL)
+    desc = dataclasses.replace(describe(CIGAR, SMALL), input_noise=-0.25)
     desc.save(tmp_path / "d.npz")
     with np.load(tmp_path / "d.npz") as z:
         older = {name: z[name] for name in z.files if name != "input_noise"}

@@ -9,6 +9,7 @@ import trimesh
 from app.core.mesh import Mesh
 from app.core.pipeline import DescribeParams, describe, smooth
 from app.core.roughness import (
+    NOISE_MIN_VERTICES,
     displacement_correlation,
     median_edge_length,
     roughness,
@@ -146,8 +147,11 @@ def test_displacement_correlation_ignores_scale_rigid_motion_and_vertex_order():
 
 def test_displacement_correlation_is_undefined_without_a_varying_displacement():
     assert np.isnan(displacement_correlation(Mesh(np.zeros((3, 3)), np.zeros((0, 3), np.int64))))
-    grid = trimesh.creation.box().subdivide()
     square = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float)
     flat_side = Mesh(square, np.array([[0, 1, 2], [1, 3, 2]]))
     assert np.isnan(displacement_correlation(flat_side))  # a plane: δ ≡ 0
-    assert np.isfinite(displacement_correlation(Mesh(np.asarray(grid.vertices), np.asarray(grid.faces))))
+    cube = trimesh.creation.box()  # 8 corners: nothing to tell noise from shape by
+    assert np.isnan(displacement_correlation(Mesh(np.asarray(cube.vertices), np.asarray(cube.faces))))
+    many = trimesh.creation.box().subdivide().subdivide().subdivide()  # 386 vertices, flat faces and creases
+    assert len(many.vertices) >= NOISE_MIN_VERTICES
+    assert np.isfinite(displacement_correlation(Mesh(np.asarray(many.vertices), np.asarray(many.faces))))
