@@ -187,21 +187,19 @@ class ShapeDescription:
             return cls(
                 hks=hks, weights=z["weights"], keypoints=z["keypoints"].astype(bool),
                 eigenvalues=z["eigenvalues"], input_vertices=int(z["input_vertices"]), local=_local(z),
-                input_noise=float(z["input_noise"]) if "input_noise" in z.files else float("nan"),
+                input_noise=_input_noise(z),
             )
 
 
-def load_local(path: str | Path) -> LocalSignature | None:
-    """The local signature of a saved description (None before format 3), without the HKS table."""
+def load_local_and_noise(path: str | Path) -> tuple[LocalSignature | None, float]:
+    """What the re-rankings read of a saved description, without its HKS table: the local signature
+    (None before format 3) and the input displacement correlation (NaN: saved before it was recorded)."""
     with np.load(path, allow_pickle=False) as z:
-        return _local(z)
+        return _local(z), _input_noise(z)
 
 
-def load_input_noise(path: str | Path) -> float:
-    """The input displacement correlation of a saved description (NaN: saved before it was recorded),
-    without the HKS table."""
-    with np.load(path, allow_pickle=False) as z:
-        return float(z["input_noise"]) if "input_noise" in z.files else float("nan")
+def _input_noise(z: np.lib.npyio.NpzFile) -> float:
+    return float(z["input_noise"]) if "input_noise" in z.files else float("nan")
 
 
 def _local(z: np.lib.npyio.NpzFile) -> LocalSignature | None:

@@ -36,6 +36,13 @@ def median_edge_length(mesh: Mesh) -> float:
     return float(np.median(np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)))
 
 
+def normal_displacement(mesh: Mesh, w: sp.csr_matrix) -> np.ndarray:
+    """(n,) δ = n · (x - W x): each vertex's offset from its neighbours' average (W (n, n), row-stochastic)
+    along its normal."""
+    x = mesh.vertices
+    return np.einsum("ij,ij->i", vertex_normals(mesh), x - w @ x)
+
+
 def roughness(mesh: Mesh, averaging: tuple[sp.csr_matrix, np.ndarray] | None = None) -> float:
     """Median |δ - W δ| / median edge length (module docstring); 0 for a mesh without faces.
 
@@ -45,8 +52,7 @@ def roughness(mesh: Mesh, averaging: tuple[sp.csr_matrix, np.ndarray] | None = N
     if len(mesh.faces) == 0:
         return 0.0
     w, has = averaging if averaging is not None else averaging_operator(mesh, "capped-area")
-    x = mesh.vertices
-    delta = np.einsum("ij,ij->i", vertex_normals(mesh), x - w @ x)  # (n,)
+    delta = normal_displacement(mesh, w)
     rough = np.abs(delta - w @ delta)[has]
     edge = median_edge_length(mesh)
     if edge <= 0 or rough.size == 0:
@@ -86,11 +92,10 @@ def displacement_correlation(mesh: Mesh) -> float:
     noise far larger than an edge folds the surface and also reads in between (docs/results.md).
     Unlike `roughness`, it needs no scale: the sign says whether the mesh's finest scale is noise.
     """
-    if len(mesh.faces) == 0:
+    if len(mesh.faces) == 0 or mesh.n_vertices < NOISE_MIN_VERTICES:
         return float("nan")
     w, has = averaging_operator(mesh, "capped-area")
-    x = mesh.vertices
-    delta = np.einsum("ij,ij->i", vertex_normals(mesh), x - w @ x)  # (n,)
+    delta = normal_displacement(mesh, w)
     d, wd = delta[has], (w @ delta)[has]
     if d.size < NOISE_MIN_VERTICES or np.ptp(d) == 0 or np.ptp(wd) == 0:
         return float("nan")

@@ -14,7 +14,6 @@ from __future__ import annotations
 import numpy as np
 
 from app.core import fusion
-from app.core.pipeline import load_input_noise
 from app.core.vocabulary import l1_distance
 from app.services.context import ServiceContext
 from app.services.errors import NotReadyError
@@ -70,12 +69,3 @@ def search(
     index_distance = l1_distance(stored, vector[None])[:, 0]  # the query as sent: what the index ranks by
     return index_distance.astype(np.float32), ids, vocabulary_id, dist.astype(np.float32)
 
-
-def stored_noise(ctx: ServiceContext, model_id: int) -> float | None:
-    """A stored model's input displacement correlation (None: not recorded, or unreadable): one small
-    read of its description, for `similar`'s re-rank."""
-    try:
-        noise = load_input_noise(ctx.blobs.description_path(model_id))
-    except (OSError, ValueError, KeyError):
-        return None
-    return noise if np.isfinite(noise) else None

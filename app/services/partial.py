@@ -18,17 +18,18 @@ samples the query matched, which the page's 3D view colours.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from app.core.partial import LocalSignature
 from app.core.partial_match import MUTUAL, PartialMatch, Region, head, match_many, votes
 from app.core.partial_match import regions as regions_of
-from app.core.pipeline import LOCAL, load_local
+from app.core.pipeline import LOCAL, load_local_and_noise
 from app.services.context import ServiceContext
 
 # whole SHREC'11 meshes have no rim (0.0); their 40-85 % pieces at least 0.26 (docs/partial.md)
@@ -49,32 +50,51 @@ SCORE_BUDGET_S = 2.0
 CHUNK = 16  # candidates scored between two looks at the clock
 
 
+@dataclass(frozen=True)
+class _Stored:
+    local: LocalSignature | None
+    input_noise: float  # NaN: not recorded
+
+
+_NOTHING = _Stored(None, float("nan"))
+
+
 class LocalCache:
-    """Local signatures of stored models by (path, mtime): a re-ingested model is read again."""
+    """What the re-rankings read of stored models' descriptions (the local signature, and the input
+    noise the fusion re-rank weighs), by (path, mtime): a re-ingested model is read again. One read of
+    a description serves both."""
 
     def __init__(self, size: int = CACHE_SIZE) -> None:
         self._size = size
-        self._items: OrderedDict[tuple[str, int], LocalSignature | None] = OrderedDict()
+        self._items: OrderedDict[tuple[str, int], _Stored] = OrderedDict()
         self._lock = threading.Lock()
 
     def get(self, path: Path) -> LocalSignature | None:
+        return self._entry(path).local
+
+    def noise(self, path: Path) -> float | None:
+        """The input displacement correlation (None: not recorded, or unreadable)."""
+        noise = self._entry(path).input_noise
+        return noise if math.isfinite(noise) else None
+
+    def _entry(self, path: Path) -> _Stored:
         try:
             key = (str(path), path.stat().st_mtime_ns)
         except OSError:  # deleted a moment ago, or never described
-            return None
+            return _NOTHING
         with self._lock:
             if key in self._items:
                 self._items.move_to_end(key)
                 return self._items[key]
         try:
-            local = load_local(path)
+            entry = _Stored(*load_local_and_noise(path))
         except (OSError, ValueError, KeyError):  # unreadable: no scores, never a failed search
-            local = None
+            entry = _NOTHING
         with self._lock:
-            self._items[key] = local
+            self._items[key] = entry
             while len(self._items) > self._size:
                 self._items.popitem(last=False)
-        return local
+        return entry
 
 
 _CACHE = LocalCache()
@@ -83,6 +103,12 @@ _CACHE = LocalCache()
 def local_of(ctx: ServiceContext, model_id: int) -> LocalSignature | None:
     """A stored model's local signature (None: none stored, or unreadable), through the LRU."""
     return _CACHE.get(ctx.blobs.description_path(model_id))
+
+
+def noise_of(ctx: ServiceContext, model_id: int) -> float | None:
+    """A stored model's input displacement correlation (None: not recorded, or unreadable), through the
+    same LRU and the same read as its local signature."""
+    return _CACHE.noise(ctx.blobs.description_path(model_id))
 
 
 def is_partial(query: LocalSignature | None, requested: bool | None) -> bool:

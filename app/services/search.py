@@ -143,10 +143,11 @@ def similar(
         rerank = None
         try:
             if fusion_rerank.applies(ctx, live):
-                local = partial_mod.local_of(ctx, model_id)  # its rim: closed or open (core.fusion)
+                # its rim (closed or open) and its input's noise (core.fusion): one read, through the LRU
+                local = partial_mod.local_of(ctx, model_id)
                 dist, ids, vid, rerank = fusion_rerank.search(ctx, live, vector, k, allowed, pair.record.id,
                                                               model_id, None if local is None else local.rim,
-                                                              fusion_rerank.stored_noise(ctx, model_id))
+                                                              partial_mod.noise_of(ctx, model_id))
             else:
                 dist, ids, vid = live.search(vector, k + 1, allowed, vocabulary_id=pair.record.id)
         except NotReadyError:

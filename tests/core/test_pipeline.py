@@ -449,8 +449,8 @@ def test_a_description_saved_before_the_input_noise_reads_it_as_unknown(tmp_path
         older = {name: z[name] for name in z.files if name != "input_noise"}
     np.savez(tmp_path / "old.npz", **older)
     assert np.isnan(ShapeDescription.load(tmp_path / "old.npz").input_noise)
-    assert np.isnan(pipeline.load_input_noise(tmp_path / "old.npz"))
-    assert pipeline.load_input_noise(tmp_path / "d.npz") == desc.input_noise
+    assert np.isnan(pipeline.load_local_and_noise(tmp_path / "old.npz")[1])
+    assert pipeline.load_local_and_noise(tmp_path / "d.npz")[1] == desc.input_noise
 
 
 def test_save_accepts_a_str_path_and_load_makes_the_keypoints_bool(tmp_path):

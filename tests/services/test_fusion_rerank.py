@@ -5,6 +5,7 @@ retried."""
 
 from __future__ import annotations
 
+import os
 from types import SimpleNamespace
 
 import numpy as np
@@ -171,7 +172,7 @@ def test_the_faiss_index_and_the_database_serve_what_the_core_ranks(data_dir):
 
     assert np.all(np.diff(db_ids) > 0)
     local = partial_mod.local_of(ctx, mid)  # the stored model's rim decides its floor (closed or open)
-    noise = fusion_rerank.stored_noise(ctx, mid)  # and its input's noise, whether a closed one is noisy
+    noise = partial_mod.noise_of(ctx, mid)  # and its input's noise, whether a closed one is noisy
     assert local is not None and noise is not None and -1.0 <= noise <= 1.0
     want, dist = fusion.adaptive_rerank(vectors[0], nearest, vectors_of, pair.vocabulary.size,
                                         pair.vocabulary.fusion.weight, fusion_rerank.RULE,
@@ -207,3 +208,31 @@ def test_the_querys_rim_and_noise_reach_the_rule(ctx, monkeypatch, rim, noise):
                    lambda j: (j, db[np.searchsorted(ids, j)]), 1, 1.0, fusion_rerank.RULE,
                    fusion_rerank.CANDIDATES, rim, noise)
     assert [h.model.id for h in result.hits] == want.tolist()
+
+
+def test_a_stored_models_rim_and_noise_come_from_one_read_of_its_description(data_dir, monkeypatch):
+    """similar() weighs the stored model by its rim and its input noise: the LRU reads the description
+    once for both, and again only when the file changes (a re-ingest)."""
+    ctx = open_context(make_settings(data_dir, fusion_rerank=True))
+    reads: list[object] = []
+    real = partial_mod.load_local_and_noise
+
+    def counting(path):
+        reads.append(path)
+        return real(path)
+
+    monkeypatch.setattr(partial_mod, "load_local_and_noise", counting)
+    monkeypatch.setattr(partial_mod, "_CACHE", partial_mod.LocalCache())
+    live = LiveIndex(ctx)
+    live.refresh()
+    with ctx.db.read() as conn:
+        assert live.pair is not None
+        mid = int(vocab_repo.vectors(conn, live.pair.record.id)[0][0])
+    local, noise = partial_mod.local_of(ctx, mid), partial_mod.noise_of(ctx, mid)
+    assert local is not None and noise is not None
+    search.similar(ctx, live, mid, k=3)
+    assert len(reads) == 1
+    path = ctx.blobs.description_path(mid)
+    stat = path.stat()
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000))  # rewritten: read again
+    assert partial_mod.noise_of(ctx, mid) == noise and len(reads) == 2
