@@ -24,7 +24,7 @@ from pathlib import Path
 
 from benchmarks.common import REPO_ROOT, peak_rss_mb, pin_threads, table, thread_env, write_json
 
-STAGES = ("load", "clean", "resample", "laplacian", "eigen", "hks", "keypoints", "encode")
+STAGES = ("load", "clean", "noise", "resample", "laplacian", "eigen", "hks", "keypoints", "encode")
 FULL_SIZES = (4000, 10000, 40000, 160000)
 
 

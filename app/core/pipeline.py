@@ -244,8 +244,9 @@ def describe_filters(
     """One eigen-solve, one description per keypoint filter (the harness compares filters; the
     solve is the cost). Description i equals describe(mesh, replace(params, keypoint_filter=filters[i]))."""
     clock = _Clock()
+    noise = _input_noise_of(mesh, clock)
     fine, rim = canonical_with_rim(mesh, params)
-    return _from_canonical(mesh, fine, rim, params, filters, clock)
+    return _from_canonical(mesh, noise, fine, rim, params, filters, clock)
 
 
 def describe_canonical(mesh: Mesh, fine: Mesh, rim: np.ndarray, params: DescribeParams) -> ShapeDescription:
@@ -253,15 +254,23 @@ def describe_canonical(mesh: Mesh, fine: Mesh, rim: np.ndarray, params: Describe
     needs both (the explain view): the mesh is resampled once. The rim is required: `fine` has its
     small holes capped, and only canonical_with_rim knows where the caps are; so is the mesh as given,
     whose vertex count and noise the description records."""
-    return _from_canonical(mesh, fine, rim, params, [params.keypoint_filter], _Clock())[0]
+    clock = _Clock()
+    noise = _input_noise_of(mesh, clock)
+    return _from_canonical(mesh, noise, fine, rim, params, [params.keypoint_filter], clock)[0]
 
 
-def _from_canonical(mesh: Mesh, fine: Mesh, rim: np.ndarray, params: DescribeParams,
+def _input_noise_of(mesh: Mesh, clock: _Clock) -> float:
+    """The mesh as given's displacement correlation, timed as the stage "noise". Measured there, not on
+    the canonical mesh: its low-pass and decimation hide the noise that still moves the HKS (the
+    fusion weighs a noisy closed query's Shape-DNA more, app.core.fusion)."""
+    noise = displacement_correlation(mesh)
+    clock.lap("noise")
+    return noise
+
+
+def _from_canonical(mesh: Mesh, input_noise: float, fine: Mesh, rim: np.ndarray, params: DescribeParams,
                     filters: Sequence[KeypointFilter], clock: _Clock) -> list[ShapeDescription]:
     input_vertices = mesh.n_vertices
-    # measured on the mesh as given: the canonical resolution's low-pass and decimation hide the noise
-    # that still moves the HKS (the fusion weighs a noisy closed query's Shape-DNA more, app.core.fusion)
-    input_noise = displacement_correlation(mesh)
     # resampling and smoothing are scale-free: one normalisation, after them, gives unit area
     smoothed = smooth(fine, input_vertices, params)
     # remeshing after smoothing: an even sampling of a noisy surface spends its vertices on the

@@ -210,7 +210,7 @@ def test_a_spectrum_that_cannot_be_computed_is_an_invalid_mesh(shrec_mesh, monke
 # 162 vertices after one subdivision: 42 * 1.5 < 120 <= 162 <= 120 * 1.5, so to_resolution neither
 # subdivides twice nor decimates
 SMALL = DescribeParams(k=12, m=6, target_vertices=120, smoothing=3, smoothing_weights="uniform")
-STAGES = ["resample", "laplacian", "eigen", "hks", "keypoints", "local"]
+STAGES = ["noise", "resample", "laplacian", "eigen", "hks", "keypoints", "local"]
 
 
 def icosphere(subdivisions: int = 1, stretch=(1.0, 1.0, 1.0)) -> Mesh:
