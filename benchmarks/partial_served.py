@@ -116,7 +116,7 @@ class Served:
                 mock.patch.object(partial_mod, "SCORE_BUDGET_S", float("inf")), \
                 mock.patch.object(partial_mod, "MUTUAL", 1.0), mock.patch.object(partial_mod, "score", keep):
             t = time.perf_counter()
-            out = search_mod._scored(None, description, hits, partial_mod.RERANK, True)  # type: ignore[arg-type]
+            out = search_mod._scored(None, description.local, hits, partial_mod.RERANK, True)  # type: ignore[arg-type]
             self.seconds.append(time.perf_counter() - t)
         return np.array([h.model.id for h in out], dtype=np.int64), out
 

@@ -92,6 +92,8 @@ class ModelAccepted(BaseModel):
 
 # Facts a job records beside its timings (one JSON column in storage): the API shows them as `result`, so
 # `timings` holds seconds only. A stored "result" object is taken as it is; these keys are older rows' form.
+# the `partial` option of POST /search and GET /models/{id}/similar
+PARTIAL: dict[str, bool | None] = {"auto": None, "true": True, "false": False}
 JOB_RESULT_KEYS = frozenset({"vocabulary_id", "models", "pruned_versions", "encoded_after_swap", "note"})
 
 

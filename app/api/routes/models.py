@@ -14,6 +14,7 @@ from app.api import limits
 from app.api.deps import CtxDep, DeleteDep, RuntimeDep, UploadDep
 from app.api.limits import IdPath
 from app.api.schemas import (
+    PARTIAL,
     ErrorResponse,
     MatchedRegion,
     ModelAccepted,
@@ -147,8 +148,14 @@ def similar(
     runtime: RuntimeDep,
     k: Annotated[int, Query(ge=1, le=search.MAX_K)] = 10,
     label: str | None = None,
+    partial: Annotated[
+        Literal["auto", "true", "false"],
+        Query(description="rank it as POST /search ranks a piece: auto does for a model with a free boundary "
+                          "(an open scan, a piece); true / false force it"),
+    ] = "auto",
 ) -> SearchResponse:
-    result = search.similar(runtime.ctx, runtime.live, model_id, k, label)
+    """The models nearest to a stored one, ranked as POST /search would rank its mesh."""
+    result = search.similar(runtime.ctx, runtime.live, model_id, k, label, PARTIAL[partial])
     return to_response(result, variants.relations_with(runtime.ctx, model_id))
 
 

@@ -10,7 +10,7 @@ from fastapi.concurrency import run_in_threadpool
 from app.api import limits
 from app.api.deps import RuntimeDep
 from app.api.routes.models import ERRORS, to_response
-from app.api.schemas import SearchResponse
+from app.api.schemas import PARTIAL, SearchResponse
 from app.api.uploads import multipart_body, read_form
 from app.services import search, variant_query
 from app.services.errors import InvalidInputError
@@ -25,7 +25,6 @@ SEARCH_BODY = multipart_body(
              "description": "re-rank the nearest models by partial matching: auto does it for a query with "
                             "a free boundary (a piece, a one-sided scan); true / false force it"},
 )
-PARTIAL = {"auto": None, "true": True, "false": False}
 
 
 @router.post(

@@ -1,0 +1,82 @@
+"""GET /models/{id}/similar ranks a stored model as POST /search ranks its mesh: an open one (a piece, a
+one-sided scan) by partial matching, with forward / reverse scores; a closed one by the whole-shape
+ranking. Small generated meshes, through httpx (TestClient)."""
+
+from __future__ import annotations
+
+import pytest
+from fastapi.testclient import TestClient
+
+from app.main import create_app
+from app.services import ingestion
+from app.services.context import open_context
+from app.storage import jobs as jobs_repo
+from app.worker.runner import Worker
+from tests.api.test_partial_api import DESCRIBE, _half, _obj, _shapes
+from tests.conftest import make_settings
+
+
+@pytest.fixture(scope="module")
+def collection(tmp_path_factory) -> tuple:
+    """The five bodies and the torus, and a half of the quadruped stored as a model of its own."""
+    data_dir = tmp_path_factory.mktemp("similar-open") / "data"
+    ctx = open_context(make_settings(data_dir, describe=DESCRIBE))
+    shapes = _shapes()
+    ids = {name: ingestion.submit(ctx, _obj(mesh), f"{name}.obj", name=name).model.id
+           for name, mesh in shapes.items()}
+    ids["half"] = ingestion.submit(ctx, _obj(_half(shapes["quadruped"])), "half.obj", name="half").model.id
+    worker = Worker(ctx, "seed")
+    worker.run_forever(exit_when_idle=True)
+    with ctx.db.write() as conn:
+        jobs_repo.enqueue(conn, "rebuild_vocabulary", payload={"size": 8})
+    worker.run_forever(exit_when_idle=True)
+    return data_dir, ids
+
+
+def _similar(client: TestClient, model_id: int, **params: str) -> list[dict]:
+    r = client.get(f"/models/{model_id}/similar", params={"k": "5", **params})
+    assert r.status_code == 200, r.text
+    return r.json()["data"]
+
+
+def test_an_open_stored_model_is_ranked_as_a_piece_and_finds_its_whole(collection):
+    data_dir, ids = collection
+    with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
+        hits = _similar(client, ids["half"])
+        assert ids["half"] not in [h["model_id"] for h in hits]  # itself excluded, as before
+        assert hits[0]["model_id"] == ids["quadruped"]
+        assert all(h["partial"] for h in hits)
+        assert all(0.0 <= h["forward"] <= 1.0 and 0.0 <= h["reverse"] <= 1.0 for h in hits)
+        assert 0.3 <= hits[0]["reverse"] <= 0.8  # the half covers about half of its whole
+        # the same mesh uploaded ranks the same models first (its own stored copy aside)
+        r = client.post("/search", files={"file": ("q.obj", _obj(_half(_shapes()["quadruped"])))},
+                        data={"k": "6"})
+        uploaded = [h["model_id"] for h in r.json()["data"] if h["model_id"] != ids["half"]]
+        assert uploaded[0] == hits[0]["model_id"]
+
+
+def test_partial_false_gives_an_open_model_the_whole_shape_ranking(collection):
+    data_dir, ids = collection
+    with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
+        hits = _similar(client, ids["half"], partial="false")
+        assert not any(h["partial"] for h in hits)
+        distances = [h["distance"] if h["rerank_distance"] is None else h["rerank_distance"] for h in hits]
+        assert distances == sorted(distances)
+
+
+def test_a_closed_model_keeps_the_whole_shape_ranking_unless_asked(collection):
+    data_dir, ids = collection
+    with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
+        auto = _similar(client, ids["torus"])
+        assert not any(h["partial"] for h in auto)
+        assert [h["model_id"] for h in auto] == [h["model_id"] for h in _similar(client, ids["torus"],
+                                                                               partial="false")]
+        forced = _similar(client, ids["torus"], partial="true")
+        assert all(h["partial"] for h in forced) and ids["torus"] not in [h["model_id"] for h in forced]
+
+
+def test_a_bad_partial_option_on_similar_is_a_clear_422(collection):
+    data_dir, ids = collection
+    with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
+        r = client.get(f"/models/{ids['torus']}/similar", params={"partial": "maybe"})
+        assert r.status_code == 422 and "partial" in r.text
