@@ -130,6 +130,7 @@ def store_synthetic(ctx: ServiceContext, rows: Sequence[LabelledFile], descs: Se
     vid, encode = _encoder(ctx)
     real = np.stack([encode(d) for d in descs]).astype(np.float64)
     rng = np.random.default_rng(seed)
+    ctx.blobs.description_path(0).parent.mkdir(parents=True, exist_ok=True)
     for start in range(0, count, BATCH):
         m = min(BATCH, count - start)
         a, b = rng.integers(0, len(descs), m), rng.integers(0, len(descs), m)
