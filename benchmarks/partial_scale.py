@@ -26,7 +26,9 @@ warm-up query, and `--wholes` whole models of SRC as well. Printed per size: p50
 (global search, hit records, coarse pass, full scoring, vote, regions) and of the whole call, the work
 the deadlines left (models the coarse pass read of those it was to read, candidates scored of those
 chosen, how often each was cut), the same pieces again with both deadlines lifted (their stage times,
-and whether the served top 10 and first hit are the lifted ones), the index and descriptions on disk,
+and whether the served top 10 and first hit are the lifted ones), what one model of the coarse pass
+costs (reading its signature without the LRU, and its coarse match; 5 pieces), the index and
+descriptions on disk,
 the index in memory, and the ratios against the first size, measured in the same process. The query
 describe (about 0.4 s through HTTP, docs/partial.md) is not part of these times.
 The LRU of local signatures starts empty at each size; the descriptions written a moment before are
@@ -182,6 +184,29 @@ def _queries(ctx: ServiceContext, live: Any, descs: Sequence[ShapeDescription],
     return out
 
 
+def per_model_costs(ctx: ServiceContext, live: Any, pieces: Sequence[ShapeDescription]) -> dict[str, float]:
+    """Median over `pieces` of the ms a model of the coarse pass costs: reading its signature from its
+    description (load_local_and_noise, no LRU: what a miss costs) and its coarse match (match_many of
+    the query's COARSE_POINTS head, in chunks of CHUNK), over the piece's COARSE_SCAN global nearest."""
+    from app.core.partial_match import head, match_many
+    from app.core.pipeline import LOCAL, load_local_and_noise
+
+    read, match = [], []
+    for d in pieces:
+        assert d.local is not None
+        _, vector = live.encode(d)
+        _, ids, _ = live.search(vector, partial_mod.COARSE_SCAN)
+        t = time.perf_counter()
+        sigs = [load_local_and_noise(ctx.blobs.description_path(int(i)))[0] for i in ids]
+        read.append(1e3 * (time.perf_counter() - t) / len(ids))
+        query = head(d.local, partial_mod.COARSE_POINTS)
+        t = time.perf_counter()
+        for start in range(0, len(sigs), partial_mod.CHUNK):
+            match_many(query, [s for s in sigs[start:start + partial_mod.CHUNK] if s is not None], LOCAL)
+        match.append(1e3 * (time.perf_counter() - t) / len(ids))
+    return {"read_ms": float(np.median(read)), "match_ms": float(np.median(match)), "models": len(ids)}
+
+
 def _pct(values: Sequence[float]) -> tuple[float, float]:
     v = np.asarray(values, dtype=np.float64)
     return (float(np.percentile(v, 50)), float(np.percentile(v, 95))) if len(v) else (np.nan, np.nan)
@@ -221,6 +246,7 @@ def measure(size: int, work_dir: Path, rows: Sequence[LabelledFile], descs: Sequ
     served = _queries(ctx, live, pieces)
     whole = _queries(ctx, live, [descs[i] for i in wholes])
     lifted = _queries(ctx, live, pieces, lifted=True)
+    costs = per_model_costs(ctx, live, pieces[:5])
     load1 = os.getloadavg()[0]
     works = [r["work"] for r in served]
     pairs = list(zip(served, lifted, strict=True))
@@ -237,7 +263,7 @@ def measure(size: int, work_dir: Path, rows: Sequence[LabelledFile], descs: Sequ
         "descriptions_bytes": _bytes_under(desc_dir),
         "real_description_bytes": float(np.mean(real_bytes)),
         "synthetic_signature_bytes": float(np.mean(synth_bytes)) if synth_bytes else None,
-        "piece": _stages(served), "whole": _stages(whole), "lifted": _stages(lifted),
+        "piece": _stages(served), "whole": _stages(whole), "lifted": _stages(lifted), "per_model": costs,
         "coarse_read": [w["coarse_read"] for w in works], "coarse_of": [w["coarse_of"] for w in works],
         "scored": [w["scored"] for w in works], "scored_of": [w["scored_of"] for w in works],
         "coarse_cut": sum(w["coarse_cut"] for w in works), "score_cut": sum(w["score_cut"] for w in works),
@@ -283,6 +309,9 @@ def _print(r: dict[str, Any]) -> None:
           f"{r['same_first_as_lifted']};  NN served {r['nn_served']:.3f} lifted {r['nn_lifted']:.3f} "
           f"(synthetic copies carry their source's label); first hit a real model {r['first_real_served']}; "
           f"whole queries' scoring cut {r['whole_score_cut']}")
+    c = r["per_model"]
+    print(f"  a model of the coarse pass (median of 5 pieces, over their {c['models']} global nearest): "
+          f"reading its signature {c['read_ms']:.3f} ms (no LRU), its coarse match {c['match_ms']:.3f} ms")
 
 
 def _ratios(results: list[dict[str, Any]]) -> None:
