@@ -104,8 +104,8 @@ class Served:
         sigs = self.signatures
         score = partial_mod.score
 
-        def keep(ctx: Any, query: Any, model_ids: Any) -> list[Any]:  # the candidates' matches, kept
-            found = score(ctx, query, model_ids)
+        def keep(ctx: Any, query: Any, model_ids: Any, work: Any = None) -> list[Any]:  # the matches, kept
+            found = score(ctx, query, model_ids, work)
             self.last = (np.asarray(model_ids, dtype=np.int64), found)
             return found
 

@@ -246,11 +246,38 @@ class VariantsPublic(BaseModel):
     count: int
 
 
+class PartialWork(BaseModel):
+    """How much of the partial matching a search did: its two steps stop at their deadlines."""
+
+    coarse_read: int = Field(
+        description="stored models the coarse pass read (a piece's: the global index's nearest, compared"
+        " on an eighth of the query's samples to pick candidates)"
+    )
+    coarse_of: int = Field(description="models it was to read (0: no coarse pass: a whole query, or a"
+                           " collection no larger than the global candidates)")
+    coarse_cut: bool = Field(description="true when its deadline stopped the coarse pass before the end")
+    scored: int = Field(description="candidates the full match reached (a piece's candidates, or a whole"
+                        " query's k hits; one without a local signature counts, with no score)")
+    scored_of: int = Field(description="candidates it was to score")
+    score_cut: bool = Field(
+        description="true when its deadline left candidates unscored: they follow the scored ones in their"
+        " global order, and the vote counted among fewer"
+    )
+
+
 class SearchResponse(BaseModel):
     data: list[SearchHit]
     count: int
     vocabulary_id: int
-    seconds: dict[str, float] = Field(description="wall time per stage")
+    seconds: dict[str, float] = Field(
+        description="wall time per stage (a dotted name is a step of the stage before the dot:"
+        " partial.coarse, partial.score, ...)"
+    )
+    partial: PartialWork | None = Field(
+        None, description="how much of the partial matching was done (a piece's re-ranking, or a whole"
+        " query's forward / reverse scores); null when the query has no local signature, or for a stored"
+        " model's similar search that is not ranked as a piece"
+    )
 
 
 class VocabularyRebuild(BaseModel):

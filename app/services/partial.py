@@ -14,6 +14,9 @@ Models described before the local signature existed (description format < 3) hav
 scores and, in a re-ranking, follow the models that have one, in their global order.
 The hits a piece's search returns (at most search.MAX_K) also get their matched region: the model
 samples the query matched, which the page's 3D view colours.
+How much of this was done (the models the coarse pass read, the candidates fully scored, each of how
+many: past a deadline, fewer) and the seconds of each step are kept in a Work, which the search
+response reports.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from app.core.partial import LocalSignature
@@ -48,6 +51,31 @@ CACHE_SIZE = 4096  # local signatures kept in memory (about 22 kB each)
 # 2.4-4.6 ms a candidate on 2 loaded cores: RERANK of them fit, a slow disk or a busy host does not
 SCORE_BUDGET_S = 2.0
 CHUNK = 16  # candidates scored between two looks at the clock
+
+
+@dataclass
+class Work:
+    """How much of one query's partial matching was done, and the seconds of each step.
+
+    coarse_read / coarse_of: the models the coarse pass read of the nearest it was to read (0 / 0: no
+    coarse pass: a whole query, or a collection no larger than GLOBAL_KEEP); scored / scored_of: the
+    candidates reached by the full scoring of those chosen (a model without a local signature counts as
+    reached: it has no score to compute). Fewer read than asked: COARSE_BUDGET_S (SCORE_BUDGET_S) cut it.
+    seconds: per step (coarse, score, vote, regions; search.py adds the hit records)."""
+
+    coarse_read: int = 0
+    coarse_of: int = 0
+    scored: int = 0
+    scored_of: int = 0
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def coarse_cut(self) -> bool:
+        return self.coarse_read < self.coarse_of
+
+    @property
+    def score_cut(self) -> bool:
+        return self.scored < self.scored_of
 
 
 @dataclass(frozen=True)
@@ -119,42 +147,59 @@ def is_partial(query: LocalSignature | None, requested: bool | None) -> bool:
 
 
 def _matches(ctx: ServiceContext, query: LocalSignature, model_ids: Sequence[int],
-             budget_s: float, mutual: bool = False) -> list[PartialMatch | None]:
-    """One PartialMatch per model (None: no signature, or not reached within budget_s; the first
-    CHUNK are always scored). mutual: with the mutual share (the score reads it when MUTUAL > 0)."""
+             budget_s: float, mutual: bool = False) -> tuple[list[PartialMatch | None], int]:
+    """(one PartialMatch per model (None: no signature, or not reached within budget_s; the first
+    CHUNK are always scored), how many models were reached). mutual: with the mutual share (the score
+    reads it when MUTUAL > 0)."""
     out: list[PartialMatch | None] = [None] * len(model_ids)
     deadline = time.monotonic() + budget_s
+    reached = 0
     for start in range(0, len(model_ids), CHUNK):
         if start and time.monotonic() > deadline:
             break  # the rest unscored: the first chunk always is, so a query never gets nothing
         chunk = range(start, min(start + CHUNK, len(model_ids)))
+        reached = chunk.stop
         signed = [(j, local_of(ctx, model_ids[j])) for j in chunk]
         have = [(j, sig) for j, sig in signed if sig is not None]
         found = match_many(query, [sig for _, sig in have], LOCAL, mutual=mutual)
         for (j, _), m in zip(have, found, strict=True):
             out[j] = m
-    return out
+    return out, reached
 
 
-def candidates(ctx: ServiceContext, query: LocalSignature | None, model_ids: Sequence[int]) -> list[int]:
+def candidates(ctx: ServiceContext, query: LocalSignature | None, model_ids: Sequence[int],
+               work: Work | None = None) -> list[int]:
     """Indices into model_ids (the global order) of a piece's candidates, in global order: the first
-    GLOBAL_KEEP and the COARSE_KEEP nearest by the coarse partial distance among the first COARSE_SCAN."""
+    GLOBAL_KEEP and the COARSE_KEEP nearest by the coarse partial distance among the first COARSE_SCAN.
+    work: gets the models the coarse pass read, of how many, and its seconds."""
     first = list(range(min(GLOBAL_KEEP, len(model_ids))))
     if query is None or len(model_ids) <= GLOBAL_KEEP:
         return first
+    t = time.perf_counter()
     scan = model_ids[:COARSE_SCAN]
-    coarse = _matches(ctx, head(query, COARSE_POINTS), scan, COARSE_BUDGET_S)
+    coarse, read = _matches(ctx, head(query, COARSE_POINTS), scan, COARSE_BUDGET_S)
+    if work is not None:
+        work.coarse_read, work.coarse_of = read, len(scan)
+        work.seconds["coarse"] = time.perf_counter() - t
     scored = sorted((m.distance, j) for j, m in enumerate(coarse) if m is not None)
     return sorted(set(first) | {j for _, j in scored[:COARSE_KEEP]})
 
 
-def score(ctx: ServiceContext, query: LocalSignature | None,
-          model_ids: Sequence[int]) -> list[PartialMatch | None]:
+def score(ctx: ServiceContext, query: LocalSignature | None, model_ids: Sequence[int],
+          work: Work | None = None) -> list[PartialMatch | None]:
     """One PartialMatch per model (None where the query or the model has no local signature, or past
-    SCORE_BUDGET_S)."""
+    SCORE_BUDGET_S). work: gets the candidates reached, of how many, and the seconds of the scoring and
+    of the vote."""
     if query is None:
         return [None] * len(model_ids)
-    return _voted(query, _matches(ctx, query, model_ids, SCORE_BUDGET_S, mutual=MUTUAL > 0))
+    t = time.perf_counter()
+    found, reached = _matches(ctx, query, model_ids, SCORE_BUDGET_S, mutual=MUTUAL > 0)
+    t_score = time.perf_counter()
+    out = _voted(query, found)
+    if work is not None:
+        work.scored, work.scored_of = reached, len(model_ids)
+        work.seconds.update(score=t_score - t, vote=time.perf_counter() - t_score)
+    return out
 
 
 def _voted(query: LocalSignature, found: list[PartialMatch | None]) -> list[PartialMatch | None]:

@@ -39,6 +39,9 @@ class SearchResult:
     hits: list[Hit]
     vocabulary_id: int
     seconds: dict[str, float]
+    # how much of the partial matching was done (None: the query has no local signature, or a stored
+    # model's similar search that is not a piece's)
+    partial: partial_mod.Work | None = None
 
 
 def check_k(k: int) -> int:
@@ -97,28 +100,38 @@ def search_description(
             continue
         t_search = time.perf_counter() - t
         t = time.perf_counter()
-        hits = _scored(ctx, description.local, _hits(ctx, dist, ids, wanted, rerank), k, piece)
+        found = _hits(ctx, dist, ids, wanted, rerank)
+        work = partial_mod.Work(seconds={"records": time.perf_counter() - t})
+        hits = _scored(ctx, description.local, found, k, piece, work)
         seconds = {"encode": t_encode, "search": t_search, "partial": time.perf_counter() - t}
-        return SearchResult(hits, vid, seconds)
+        # the partial stage's steps (hit records, coarse pass, full scoring, vote, regions)
+        seconds.update({f"partial.{step}": v for step, v in work.seconds.items()})
+        return SearchResult(hits, vid, seconds, work if description.local is not None else None)
     raise NotReadyError("the vocabulary is being swapped; retry")
 
 
 def _scored(ctx: ServiceContext, local: LocalSignature | None, hits: list[Hit], k: int,
-            piece: bool) -> list[Hit]:
+            piece: bool, work: partial_mod.Work | None = None) -> list[Hit]:
     """The first k hits with their forward / reverse scores against the query's local signature; a
     piece's candidates (app.services.partial) ordered by partial score (models without a local
-    signature after, in their global order)."""
+    signature after, in their global order). work: gets how much of the matching was done, and its
+    steps' seconds."""
     if piece:  # the candidates include the global GLOBAL_KEEP >= k nearest: no other hit is needed
-        hits = [hits[j] for j in partial_mod.candidates(ctx, local, [h.model.id for h in hits])]
+        ids = [h.model.id for h in hits]
+        hits = [hits[j] for j in partial_mod.candidates(ctx, local, ids, work)]
     else:
         hits = hits[:k]
-    found = partial_mod.score(ctx, local, [h.model.id for h in hits])
+    found = partial_mod.score(ctx, local, [h.model.id for h in hits], work)
     if piece:
         rank_of = [m.score if m is not None else float("inf") for m in found]
         order = sorted(range(len(hits)), key=lambda j: (rank_of[j], j))
         hits, found = [hits[j] for j in order[:k]], [found[j] for j in order[:k]]
-    ids = [h.model.id for h in hits]
-    where = partial_mod.regions(ctx, local, ids, found) if piece else [None] * len(hits)
+    where: list[Region | None] = [None] * len(hits)
+    if piece:
+        t = time.perf_counter()
+        where = partial_mod.regions(ctx, local, [h.model.id for h in hits], found)
+        if work is not None:
+            work.seconds["regions"] = time.perf_counter() - t
     return [
         replace(h, rank=rank, forward=m.forward if m else None, reverse=m.reverse if m else None,
                 partial=piece, region=r)
@@ -172,6 +185,9 @@ def similar(
             return SearchResult(hits, vid, seconds)
         t = time.perf_counter()
         found = _hits(ctx, dist[keep], ids[keep], int(keep.sum()))
-        hits = _scored(ctx, local, found, k, piece=True)
-        return SearchResult(hits, vid, {**seconds, "partial": time.perf_counter() - t})
+        work = partial_mod.Work(seconds={"records": time.perf_counter() - t})
+        hits = _scored(ctx, local, found, k, True, work)
+        seconds["partial"] = time.perf_counter() - t
+        seconds.update({f"partial.{step}": v for step, v in work.seconds.items()})
+        return SearchResult(hits, vid, seconds, work if local is not None else None)
     raise NotReadyError("the vocabulary is being swapped; retry")

@@ -172,3 +172,35 @@ def test_a_whole_query_has_no_region(partial_dir):
     with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
         hits = _search(client, _obj(_shapes()["torus"]))["data"]
         assert all(h["region"] is None for h in hits)
+
+
+def test_a_small_collection_reports_every_candidate_matched_and_nothing_cut(partial_dir):
+    """Six models: a piece's candidates are all of them (no coarse pass: the global head holds the
+    collection), each fully scored; a whole query's k hits are scored too. No deadline cut either."""
+    data_dir, ids = partial_dir
+    with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
+        piece = _search(client, _obj(_half(_shapes()["quadruped"])))
+        whole = _search(client, _obj(_shapes()["torus"]))
+    assert piece["partial"] == {"coarse_read": 0, "coarse_of": 0, "coarse_cut": False,
+                                "scored": len(ids), "scored_of": len(ids), "score_cut": False}
+    assert {"partial.records", "partial.score", "partial.vote", "partial.regions"} <= set(piece["seconds"])
+    assert whole["partial"] == {"coarse_read": 0, "coarse_of": 0, "coarse_cut": False,
+                                "scored": 5, "scored_of": 5, "score_cut": False}
+
+
+def test_a_deadline_that_cuts_the_matching_is_reported(partial_dir, monkeypatch):
+    """Both deadlines past at once, one model a chunk: the coarse pass reads one model of the six, the
+    full scoring one candidate of the global head and that model; the answer says both were cut, and
+    only the candidate scored has scores."""
+    data_dir, ids = partial_dir
+    monkeypatch.setattr(partial_service, "GLOBAL_KEEP", 3)
+    monkeypatch.setattr(partial_service, "CHUNK", 1)
+    monkeypatch.setattr(partial_service, "COARSE_BUDGET_S", 0.0)
+    monkeypatch.setattr(partial_service, "SCORE_BUDGET_S", 0.0)
+    with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
+        body = _search(client, _obj(_half(_shapes()["quadruped"])))
+    work = body["partial"]
+    assert (work["coarse_read"], work["coarse_of"], work["coarse_cut"]) == (1, len(ids), True)
+    assert work["scored"] == 1 and work["scored_of"] in (3, 4) and work["score_cut"]
+    assert len(body["data"]) == work["scored_of"]
+    assert [h["forward"] is not None for h in body["data"]] == [True] + [False] * (work["scored_of"] - 1)

@@ -42,7 +42,10 @@ def _similar(client: TestClient, model_id: int, **params: str) -> list[dict]:
 def test_an_open_stored_model_is_ranked_as_a_piece_and_finds_its_whole(collection):
     data_dir, ids = collection
     with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
-        hits = _similar(client, ids["half"])
+        r = client.get(f"/models/{ids['half']}/similar", params={"k": "5"})
+        assert r.status_code == 200, r.text
+        hits, work = r.json()["data"], r.json()["partial"]
+        assert work["scored"] == work["scored_of"] >= 5 and not work["score_cut"]  # what the matching did
         assert ids["half"] not in [h["model_id"] for h in hits]  # itself excluded, as before
         assert hits[0]["model_id"] == ids["quadruped"]
         assert all(h["partial"] for h in hits)
@@ -67,8 +70,9 @@ def test_partial_false_gives_an_open_model_the_whole_shape_ranking(collection):
 def test_a_closed_model_keeps_the_whole_shape_ranking_unless_asked(collection):
     data_dir, ids = collection
     with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
-        auto = _similar(client, ids["torus"])
-        assert not any(h["partial"] for h in auto)
+        r = client.get(f"/models/{ids['torus']}/similar", params={"k": "5"})
+        auto = r.json()["data"]
+        assert not any(h["partial"] for h in auto) and r.json()["partial"] is None
         assert [h["model_id"] for h in auto] == [h["model_id"] for h in _similar(client, ids["torus"],
                                                                                partial="false")]
         forced = _similar(client, ids["torus"], partial="true")

@@ -197,7 +197,7 @@ def test_the_querys_rim_and_noise_reach_the_rule(ctx, monkeypatch, rim, noise):
         return real(*args, **kwargs)
 
     monkeypatch.setattr(fusion_rerank.fusion, "adaptive_rerank", spy)
-    monkeypatch.setattr(search.partial_mod, "score", lambda ctx, local, ids: [None] * len(ids))
+    monkeypatch.setattr(search.partial_mod, "score", lambda ctx, local, ids, work=None: [None] * len(ids))
     query = SimpleNamespace(local=SimpleNamespace(rim=rim), input_noise=noise)
     result = search.search_description(ctx, BruteLive(), query, k=6)  # type: ignore[arg-type]
     assert seen == [(rim, noise)]

@@ -148,11 +148,13 @@ def test_search_description_passes_query_k_and_label_through(ctx):
 
 
 def test_search_description_times_encode_and_search_apart(ctx, monkeypatch):
-    ticks = iter([10.0, 11.5, 20.0, 20.25, 30.0, 30.125])
+    ticks = iter([10.0, 11.5, 20.0, 20.25, 30.0, 30.0625, 30.125])
     monkeypatch.setattr(search, "time", SimpleNamespace(perf_counter=lambda: next(ticks)))
     whole = SimpleNamespace(local=None, input_noise=None)
     result = search.search_description(ctx, EncodingLive([1]), whole, k=1)  # type: ignore[arg-type]
-    assert result.seconds == {"encode": 1.5, "search": 0.25, "partial": 0.125}
+    # the partial stage's hit records are a step of it (a query without a signature has no other)
+    assert result.seconds == {"encode": 1.5, "search": 0.25, "partial": 0.125, "partial.records": 0.0625}
+    assert result.partial is None
 
 
 def test_similar_times_the_whole_answer(ctx, monkeypatch):

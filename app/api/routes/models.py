@@ -21,6 +21,7 @@ from app.api.schemas import (
     ModelCreate,
     ModelPublic,
     ModelsPublic,
+    PartialWork,
     SearchHit,
     SearchResponse,
 )
@@ -205,6 +206,12 @@ def to_response(
         )
         for h in result.hits
     ]
+    work = result.partial
+    partial = None if work is None else PartialWork(
+        coarse_read=work.coarse_read, coarse_of=work.coarse_of, coarse_cut=work.coarse_cut,
+        scored=work.scored, scored_of=work.scored_of, score_cut=work.score_cut,
+    )
     return SearchResponse(
-        data=hits, count=len(hits), vocabulary_id=result.vocabulary_id, seconds=result.seconds
+        data=hits, count=len(hits), vocabulary_id=result.vocabulary_id, seconds=result.seconds,
+        partial=partial,
     )

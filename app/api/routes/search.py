@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 from fastapi import APIRouter, Request
 from fastapi.concurrency import run_in_threadpool
@@ -67,4 +68,4 @@ async def search_mesh(request: Request, runtime: RuntimeDep) -> SearchResponse:
     seconds["variants"] = time.perf_counter() - t
     seconds["total"] = sum(v for name, v in seconds.items() if "." not in name)
     relations = {i: e["relation"] for i, e in found.items()}
-    return to_response(search.SearchResult(result.hits, result.vocabulary_id, seconds), relations, found)
+    return to_response(replace(result, seconds=seconds), relations, found)
