@@ -13,8 +13,10 @@ Per column, mAP % (and NN) of: the BoF part alone, the Shape-DNA line of `shapeb
 the served fusion (BoF + 1 × DNA, each over its scale), reciprocal-rank fusion, per-query local
 scaling, and the query-adaptive re-rank of app.core.fusion twice: over whole rows (`adaptive/all`)
 and as served (`adaptive`: candidates are the union of two fused-index searches of N each, the query
-and the expanded query; what is outside them follows in the served order). The last line is each
-rule's worst margin against the better of BoF and Shape-DNA.
+and the expanded query; what is outside them follows in the served order), and `adaptive+pieces`,
+the service's ranking: the same with a query that has a rim (an open scan, a piece) ranked as a piece
+(app.core.piece_rank). The last line is each rule's worst margin against the better of BoF and
+Shape-DNA.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ import contextlib
 import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -64,6 +66,8 @@ class Column:
     query_dna: np.ndarray  # (q, c)
     query_rims: np.ndarray  # (q,) free boundary over √area (NaN: no local signature)
     query_noises: np.ndarray  # (q,) input displacement correlation (measured from the mesh if not stored)
+    db_locals: list = field(default_factory=list)  # (N,) local signatures (None: none stored)
+    query_locals: list = field(default_factory=list)  # (q,)
 
 
 def _load(folder: sets.Folder, cache: Path, variant: Variant, vocab: Vocabulary) -> tuple | None:
@@ -79,7 +83,8 @@ def _load(folder: sets.Folder, cache: Path, variant: Variant, vocab: Vocabulary)
         path, sha = folder.files[i]
         with contextlib.suppress(InvalidMeshError, ValueError):  # unreadable now: unknown, weighed as clean
             noises[i] = displacement_correlation(load_variant(str(path), sha, variant))
-    return fused, np.stack([shape_dna(d.eigenvalues) for d in descs]), adaptive.rims_of(descs), noises
+    return (fused, np.stack([shape_dna(d.eigenvalues) for d in descs]), adaptive.rims_of(descs), noises,
+            [d.local for d in descs])
 
 
 def load_column(spec: str, cache: Path, vocab: Vocabulary) -> Column | None:
@@ -96,11 +101,13 @@ def load_column(spec: str, cache: Path, vocab: Vocabulary) -> Column | None:
         if q is None:
             return None
         pairs = sets.counterparts(folder, other)
-        return Column(spec, folder.labels, other.labels, pairs, base[0], q[0], base[1], q[1], q[2], q[3])
+        return Column(spec, folder.labels, other.labels, pairs, base[0], q[0], base[1], q[1], q[2], q[3],
+                      base[4], q[4])
     q = _load(folder, cache, Variant(float(noise), 0), vocab) if noise else base
     if q is None:
         return None
-    return Column(spec, folder.labels, folder.labels, np.arange(n), base[0], q[0], base[1], q[1], q[2], q[3])
+    return Column(spec, folder.labels, folder.labels, np.arange(n), base[0], q[0], base[1], q[1], q[2], q[3],
+                  base[4], q[4])
 
 
 def scores(distances: np.ndarray, col: Column) -> tuple[float, float]:
@@ -121,11 +128,13 @@ def ranks(d: np.ndarray) -> np.ndarray:
 
 
 def served_adaptive(
-    col: Column, words: int, stored: float, rule: fusion.AdaptiveRule, n_cand: int
+    col: Column, words: int, stored: float, rule: fusion.AdaptiveRule, n_cand: int, pieces: bool = False
 ) -> np.ndarray:
-    """(q, N) as served (app.evaluation.adaptive: brute-force L1 for the index)."""
+    """(q, N) as served (app.evaluation.adaptive: brute-force L1 for the index); pieces: a query with a
+    rim ranked as a piece, as the service does (slower: a partial match per candidate)."""
+    locals_ = (col.query_locals, col.db_locals) if pieces else (None, None)
     return _masked(adaptive.ranks(col.queries, col.db, col.left_out, words, stored, rule, n_cand,
-                                  col.query_rims, col.query_noises), col)
+                                  col.query_rims, col.query_noises, *locals_), col)
 
 
 def full_adaptive(col: Column, words: int, stored: float, rule: fusion.AdaptiveRule) -> np.ndarray:
@@ -159,6 +168,7 @@ def rules(words: int, stored: float, rule: fusion.AdaptiveRule, n_cand: int) -> 
         "local 10": local,
         "adaptive/all": lambda col: full_adaptive(col, words, stored, rule),
         "adaptive": lambda col: served_adaptive(col, words, stored, rule, n_cand),
+        "adaptive+pieces": lambda col: served_adaptive(col, words, stored, rule, n_cand, pieces=True),
     }
 
 
@@ -179,7 +189,7 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(f"{args.vocabulary} has no fusion scales")
     table = rules(vocab.size, vocab.fusion.weight, fusion.AdaptiveRule(), args.candidates)
     print(f"cache {cache}, vocabulary {args.vocabulary}, {fusion.AdaptiveRule()}, N = {args.candidates}")
-    print("column".ljust(44) + "".join(name.rjust(15) for name in table) + "   seconds")
+    print("column".ljust(44) + "".join(name.rjust(16) for name in table) + "   seconds")
     worst = {name: np.inf for name in table}
     for spec in columns:
         t = time.perf_counter()
@@ -190,9 +200,9 @@ def main(argv: list[str] | None = None) -> None:
         best = max(got["BoF"][0], got["DNA"][0])
         for name, (m, _) in got.items():
             worst[name] = min(worst[name], m - best)
-        cells = "".join(f"{m:8.2f} ({nn:3.0f})" for m, nn in got.values())
+        cells = "".join(f"{m:9.2f} ({nn:3.0f})" for m, nn in got.values())
         print(f"{spec[-44:]:44}{cells}   {time.perf_counter() - t:6.1f}", flush=True)
-    print("worst against max(BoF, DNA)".ljust(44) + "".join(f"{v:15.2f}" for v in worst.values()))
+    print("worst against max(BoF, DNA)".ljust(44) + "".join(f"{v:16.2f}" for v in worst.values()))
 
 
 if __name__ == "__main__":

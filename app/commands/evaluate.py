@@ -103,8 +103,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--fusion", default="", metavar="W[,W]",
                    help="per BoF row, also a row fused with Shape-DNA at each weight W (e.g. 0.5,1)")
     p.add_argument("--adaptive-fusion", action="store_true",
-                   help="with --vocabulary: also score each frozen fused line re-ranked by the "
-                   "query-adaptive fusion the service runs (SHAPEBAG_FUSION_RERANK)")
+                   help="with --vocabulary: also score each frozen fused line ranked as the service "
+                   "ranks it: the query-adaptive fusion (SHAPEBAG_FUSION_RERANK), and a query with a rim "
+                   "(a piece, an open scan) by partial matching")
     p.add_argument("--seed", type=int, default=0, help="k-means and noise seed")
     p.add_argument("--seeds", type=int, default=1, metavar="N",
                    help="average BoF lines over N k-means seeds (seed, seed+1, ...) and show their spread")

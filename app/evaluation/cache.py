@@ -57,7 +57,8 @@ class Variant:
 # other app/core module, sub-packages included, keys the cache: editing any of them (the method is
 # being tuned, a module is split in two) must invalidate it, or an evaluation would silently report
 # stale descriptions
-_NOT_DESCRIBE = ("vocabulary", "fusion", "descriptor", "metrics", "baselines", "variants", "partial_match")
+_NOT_DESCRIBE = ("vocabulary", "fusion", "descriptor", "metrics", "baselines", "variants", "partial_match",
+                 "piece_rank")
 _NOT_D2 = ("vocabulary", "fusion", "descriptor", "metrics", "laplacian", "spectrum", "hks", "keypoints",
            "pipeline", "smoothing")
 

@@ -240,7 +240,8 @@ def _adaptive_lines(
     queries: list[ShapeDescription] | None, labels: np.ndarray, params: EncodeParams, other: CrossSet | None,
 ) -> list[RowResult]:
     """The frozen fused lines `fixed` (clean, noisy, other folder) re-ranked as the service does
-    (app.evaluation.adaptive), each Δ against its fixed-fusion line."""
+    (app.evaluation.adaptive: the fusion re-rank, and a query with a rim ranked as a piece), each Δ
+    against its fixed-fusion line."""
     scales = vocab.fusion
     if scales is None or scales.weight <= 0:
         return []
@@ -256,8 +257,11 @@ def _adaptive_lines(
         t0 = time.perf_counter()
         q_vec = np.stack([vocab.encode(d, params) for d in q_descs])
         rims = adaptive.rims_of(q_descs)  # a closed query weighs its Shape-DNA as the fixed fusion at least
+        # a query with a rim is ranked as the service ranks a piece (by partial score), as /search and
+        # /models/{id}/similar do
         rank = adaptive.ranks(q_vec, db_vec, left_out, vocab.size, scales.weight, rims=rims,
-                              noises=adaptive.noises_of(q_descs))
+                              noises=adaptive.noises_of(q_descs), query_locals=[d.local for d in q_descs],
+                              db_locals=[d.local for d in db])
         if cross is None:
             scores = metrics.retrieval_scores(rank, labels)
         else:

@@ -7,7 +7,8 @@ COARSE_POINTS samples) among the COARSE_SCAN nearest of the global index: the gl
 piece defeats, and it left the piece's class out of its top 200 for 8 % of SHREC'11's 60-85 % pieces,
 the coarse pass for 1 % (docs/partial.md). The candidates are re-ranked by the local signatures'
 score (app.core.partial_match: the distance less the weight of the share of the query for which the
-candidate is among the VOTE_TOP nearest of the candidates scored). A
+candidate is among the VOTE_TOP nearest of the candidates scored): the steps of app.core.piece_rank,
+run here with the signatures read lazily and a deadline on each pass. A
 closed query keeps the global ranking exactly. Every hit gets
 forward and reverse scores either way.
 Models described before the local signature existed (description format < 3) have none: they get no
@@ -26,23 +27,23 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from app.core import piece_rank
 from app.core.partial import LocalSignature
-from app.core.partial_match import MUTUAL, PartialMatch, Region, head, match_many, votes
+from app.core.partial_match import MUTUAL, PartialMatch, Region, head, match_many
 from app.core.partial_match import regions as regions_of
 from app.core.pipeline import LOCAL, load_local_and_noise
 from app.services.context import ServiceContext
 
-# whole SHREC'11 meshes have no rim (0.0); their 40-85 % pieces at least 0.26 (docs/partial.md)
-RIM_PARTIAL = 0.2
-# a piece's candidates (docs/partial.md): global top 100 + coarse top 100 took SHREC'11's 60-85 %
-# pieces from 76.9 (global top 200) to 82.9 mAP on a sample of 100, for the same 200 full matches
-GLOBAL_KEEP = 100
-COARSE_KEEP = 100
-COARSE_POINTS = 32  # an eighth of the samples: an eighth of a full match's cost per model
-COARSE_SCAN = 2000  # models the coarse pass reads, nearest first: all of a collection of this size
+# the piece's steps and their sizes are app.core.piece_rank's (the evaluation runs the same ones); here
+# they run with the signatures read lazily and a deadline on each pass
+RIM_PARTIAL = piece_rank.RIM_PARTIAL
+GLOBAL_KEEP = piece_rank.GLOBAL_KEEP
+COARSE_KEEP = piece_rank.COARSE_KEEP
+COARSE_POINTS = piece_rank.COARSE_POINTS
+COARSE_SCAN = piece_rank.COARSE_SCAN
 RERANK = GLOBAL_KEEP + COARSE_KEEP  # at most this many candidates get a full match
 COARSE_BUDGET_S = 1.0  # past it the models not yet read are no coarse candidates
 CACHE_SIZE = 4096  # local signatures kept in memory (about 22 kB each)
@@ -181,8 +182,7 @@ def candidates(ctx: ServiceContext, query: LocalSignature | None, model_ids: Seq
     if work is not None:
         work.coarse_read, work.coarse_of = read, len(scan)
         work.seconds["coarse"] = time.perf_counter() - t
-    scored = sorted((m.distance, j) for j, m in enumerate(coarse) if m is not None)
-    return sorted(set(first) | {j for _, j in scored[:COARSE_KEEP]})
+    return piece_rank.chosen(len(model_ids), coarse, GLOBAL_KEEP, COARSE_KEEP)
 
 
 def score(ctx: ServiceContext, query: LocalSignature | None, model_ids: Sequence[int],
@@ -195,20 +195,10 @@ def score(ctx: ServiceContext, query: LocalSignature | None, model_ids: Sequence
     t = time.perf_counter()
     found, reached = _matches(ctx, query, model_ids, SCORE_BUDGET_S, mutual=MUTUAL > 0)
     t_score = time.perf_counter()
-    out = _voted(query, found)
+    out = piece_rank.voted(query, found, LOCAL)
     if work is not None:
         work.scored, work.scored_of = reached, len(model_ids)
         work.seconds.update(score=t_score - t, vote=time.perf_counter() - t_score)
-    return out
-
-
-def _voted(query: LocalSignature, found: list[PartialMatch | None]) -> list[PartialMatch | None]:
-    """The matches with their vote share among the scored candidates (the score reads it)."""
-    scored = [(j, m) for j, m in enumerate(found) if m is not None]
-    shares = votes(query, [m for _, m in scored], LOCAL)
-    out = list(found)
-    for (j, m), share in zip(scored, shares, strict=True):
-        out[j] = replace(m, vote=float(share))
     return out
 
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from app.core import piece_rank
 from app.core.partial import LocalSignature
 from app.core.partial_match import Region
 from app.core.pipeline import ShapeDescription
@@ -123,8 +124,7 @@ def _scored(ctx: ServiceContext, local: LocalSignature | None, hits: list[Hit], 
         hits = hits[:k]
     found = partial_mod.score(ctx, local, [h.model.id for h in hits], work)
     if piece:
-        rank_of = [m.score if m is not None else float("inf") for m in found]
-        order = sorted(range(len(hits)), key=lambda j: (rank_of[j], j))
+        order = piece_rank.by_score(found)
         hits, found = [hits[j] for j in order[:k]], [found[j] for j in order[:k]]
     where: list[Region | None] = [None] * len(hits)
     if piece:

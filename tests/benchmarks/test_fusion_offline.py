@@ -12,7 +12,8 @@ from app.core.vocabulary import Vocabulary
 from app.evaluation.cache import content_sha256
 from benchmarks import fusion_offline
 
-RULES = ("BoF", "DNA", "DNA part", "served", "RRF 60", "local 10", "adaptive/all", "adaptive")
+RULES = ("BoF", "DNA", "DNA part", "served", "RRF 60", "local 10", "adaptive/all", "adaptive",
+         "adaptive+pieces")
 
 
 def _description(rng: np.random.Generator, centre: float) -> ShapeDescription:

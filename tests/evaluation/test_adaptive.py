@@ -57,3 +57,31 @@ def test_a_distinct_nearest_stays_first():
     strict = adaptive.ranks(q, DB, np.array([-1]), 1, 1.0, fusion.AdaptiveRule(neighbours=3, expansion=1,
                                                                                 distinct=0.75), candidates=6)
     np.testing.assert_array_equal(strict, off)
+
+
+def test_a_query_with_a_rim_is_ranked_as_a_piece_and_a_closed_one_as_before(monkeypatch):
+    """With the local signatures, a piece's row is app.core.piece_rank's order over the fixed fusion's
+    (the left-out shape still last); a closed query's row is the re-rank's, as without them."""
+    from types import SimpleNamespace
+
+    from app.core import piece_rank
+
+    seen = {}
+
+    def fake_order(query, order, signature_of, params):
+        seen["order"] = order.copy()
+        return order[::-1]  # any permutation of the order: the row must follow it
+
+    monkeypatch.setattr(piece_rank, "piece_order", fake_order)
+    rule = fusion.AdaptiveRule(neighbours=2, expansion=1)
+    queries = DB[[0, 3]] + 0.05
+    piece, closed = SimpleNamespace(rim=1.0), SimpleNamespace(rim=0.0)
+    left_out = np.array([0, -1])
+    with_locals = adaptive.ranks(queries, DB, left_out, 1, 1.0, rule, candidates=2,
+                                 query_locals=[piece, closed], db_locals=[closed] * 6)
+    without = adaptive.ranks(queries, DB, left_out, 1, 1.0, rule, candidates=2)
+    fixed = [j for j in np.argsort(np.abs(DB - queries[0]).sum(1), kind="stable") if j != 0]
+    np.testing.assert_array_equal(seen["order"], fixed)  # the global order, the left-out shape not in it
+    np.testing.assert_array_equal(np.argsort(with_locals[0])[:5], fixed[::-1])
+    assert with_locals[0, 0] == 5  # left out: last
+    np.testing.assert_array_equal(with_locals[1], without[1])

@@ -23,7 +23,7 @@ def scored(monkeypatch):
         return [f"match-{m}" for m in models]
 
     monkeypatch.setattr(partial, "match_many", fake_match)
-    monkeypatch.setattr(partial, "_voted", lambda query, found: found)  # fake matches have no samples
+    monkeypatch.setattr(partial.piece_rank, "voted", lambda query, found, params: found)  # fakes: no samples
     ctx = SimpleNamespace(blobs=SimpleNamespace(description_path=lambda i: f"no-sig-{i}" if i == 7 else i))
 
     def run(budget_s: float, work: partial.Work | None = None) -> tuple[list, list[int]]:

@@ -1,0 +1,85 @@
+"""How a piece's search orders a collection: its candidates, their partial scores, the order (pure).
+
+A query whose rim (app.core.partial.rim_length) is at least RIM_PARTIAL is taken for a piece. Its
+candidates are the first GLOBAL_KEEP models of the global order and the COARSE_KEEP nearest by a coarse
+partial distance (the query's first COARSE_POINTS samples) among the first COARSE_SCAN; each candidate
+is scored (match_many, then the vote among the candidates scored) and the candidates come first by
+score, the models without a score after them in their global order. The service
+(app.services.partial) runs these steps with the signatures read lazily and a deadline on each pass;
+the evaluation (app.evaluation.adaptive) runs them whole, through `piece_order`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from app.core.partial import LocalParams, LocalSignature
+from app.core.partial_match import PartialMatch, head, match_many, votes
+
+# whole SHREC'11 meshes have no rim (0.0); their 40-85 % pieces at least 0.26 (docs/partial.md)
+RIM_PARTIAL = 0.2
+# a piece's candidates (docs/partial.md): global top 100 + coarse top 100 took SHREC'11's 60-85 %
+# pieces from 76.9 (global top 200) to 82.9 mAP on a sample of 100, for the same 200 full matches
+GLOBAL_KEEP = 100
+COARSE_KEEP = 100
+COARSE_POINTS = 32  # an eighth of the samples: an eighth of a full match's cost per model
+COARSE_SCAN = 2000  # models the coarse pass reads, nearest first: all of a collection of this size
+
+
+def is_piece(query: LocalSignature | None, requested: bool | None = None) -> bool:
+    """The caller's choice when given, else whether the query has a rim."""
+    if requested is not None:
+        return requested
+    return query is not None and query.rim >= RIM_PARTIAL
+
+
+def chosen(n: int, coarse: Sequence[PartialMatch | None], keep: int = GLOBAL_KEEP,
+           coarse_keep: int = COARSE_KEEP) -> list[int]:
+    """Indices into a global order of n models, in that order: the first `keep`, and the `coarse_keep`
+    with the smallest coarse distance (coarse: one match or None per model of the order's head)."""
+    scored = sorted((m.distance, j) for j, m in enumerate(coarse) if m is not None)
+    return sorted(set(range(min(keep, n))) | {j for _, j in scored[:coarse_keep]})
+
+
+def voted(query: LocalSignature, found: Sequence[PartialMatch | None],
+          params: LocalParams) -> list[PartialMatch | None]:
+    """The matches with their vote share among the candidates scored (the score reads it)."""
+    scored = [(j, m) for j, m in enumerate(found) if m is not None]
+    shares = votes(query, [m for _, m in scored], params)
+    out = list(found)
+    for (j, m), share in zip(scored, shares, strict=True):
+        out[j] = replace(m, vote=float(share))
+    return out
+
+
+def by_score(found: Sequence[PartialMatch | None]) -> list[int]:
+    """Indices of `found` (candidates in global order) by score, the unscored last in their order."""
+    rank = [m.score if m is not None else float("inf") for m in found]
+    return sorted(range(len(found)), key=lambda j: (rank[j], j))
+
+
+def piece_order(query: LocalSignature, order: np.ndarray,
+                signature_of: Callable[[int], LocalSignature | None], params: LocalParams,
+                keep: int = GLOBAL_KEEP, coarse_keep: int = COARSE_KEEP) -> np.ndarray:
+    """The ranking a piece's search serves, with no deadline: order (N,) the collection's indices in
+    the global order -> (N,) the candidates by score, then every other model in the global order.
+    signature_of(index): that model's local signature (None: it has none); keep, coarse_keep: as
+    chosen()."""
+    def matches(q: LocalSignature, indices: np.ndarray) -> list[PartialMatch | None]:
+        sigs = [signature_of(int(i)) for i in indices]
+        have = [(j, s) for j, s in enumerate(sigs) if s is not None]
+        found = match_many(q, [s for _, s in have], params) if have else []
+        out: list[PartialMatch | None] = [None] * len(sigs)
+        for (j, _), m in zip(have, found, strict=True):
+            out[j] = m
+        return out
+
+    coarse = [] if len(order) <= keep else matches(head(query, COARSE_POINTS), order[:COARSE_SCAN])
+    first = chosen(len(order), coarse, keep, coarse_keep)
+    candidates = order[first]
+    found = voted(query, matches(query, candidates), params)
+    ranked = candidates[by_score(found)]
+    return np.concatenate([ranked, order[~np.isin(order, ranked)]])
