@@ -127,9 +127,11 @@ def test_two_api_processes_answer_identically(db_url, tmp_path, corpus):  # noqa
         _wait(dropped, 60, f"model {gone} dropped by both processes")
         with ThreadPoolExecutor(4) as pool:
             after = list(pool.map(lambda _: _search(base, query), range(8)))
-        assert (
-            all(a == after[0] for a in after) and after[0][:4] == [h for h in answers[0] if h[0] != gone][:4]
-        )
+        assert all(a == after[0] for a in after)  # both processes again answer identically
+        # each model's index distance is what it was; the order may change, since the fusion re-rank
+        # expands the query with its nearest models, and the deleted one was the nearest
+        before = dict(answers[0])
+        assert gone not in dict(after[0]) and all(before[i] == d for i, d in after[0] if i in before)
     finally:
         proc.terminate()  # uvicorn's parent stops its processes, which stop their workers
         try:
