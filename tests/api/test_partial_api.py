@@ -62,12 +62,17 @@ def partial_dir(tmp_path_factory) -> tuple[Path, dict[str, int]]:
     ids = {}
     for name, mesh in _shapes().items():
         ids[name] = ingestion.submit(ctx, _obj(mesh), f"{name}.obj", name=name, label=name).model.id
+    describe_and_fit(ctx)
+    return data_dir, ids
+
+
+def describe_and_fit(ctx) -> None:
+    """Run the queued ingests, then fit an 8-word vocabulary on them (the test settings ship none)."""
     worker = Worker(ctx, "seed")
     worker.run_forever(exit_when_idle=True)
     with ctx.db.write() as conn:
         jobs_repo.enqueue(conn, "rebuild_vocabulary", payload={"size": 8})
     worker.run_forever(exit_when_idle=True)
-    return data_dir, ids
 
 
 def _search(client: TestClient, data: bytes, **fields: str) -> dict:

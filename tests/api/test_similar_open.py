@@ -10,9 +10,7 @@ from fastapi.testclient import TestClient
 from app.main import create_app
 from app.services import ingestion
 from app.services.context import open_context
-from app.storage import jobs as jobs_repo
-from app.worker.runner import Worker
-from tests.api.test_partial_api import DESCRIBE, _half, _obj, _shapes
+from tests.api.test_partial_api import DESCRIBE, _half, _obj, _shapes, describe_and_fit
 from tests.conftest import make_settings
 
 
@@ -25,11 +23,7 @@ def collection(tmp_path_factory) -> tuple:
     ids = {name: ingestion.submit(ctx, _obj(mesh), f"{name}.obj", name=name).model.id
            for name, mesh in shapes.items()}
     ids["half"] = ingestion.submit(ctx, _obj(_half(shapes["quadruped"])), "half.obj", name="half").model.id
-    worker = Worker(ctx, "seed")
-    worker.run_forever(exit_when_idle=True)
-    with ctx.db.write() as conn:
-        jobs_repo.enqueue(conn, "rebuild_vocabulary", payload={"size": 8})
-    worker.run_forever(exit_when_idle=True)
+    describe_and_fit(ctx)
     return data_dir, ids
 
 
