@@ -78,3 +78,19 @@ def test_a_bad_partial_option_on_similar_is_a_clear_422(collection):
     with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
         r = client.get(f"/models/{ids['torus']}/similar", params={"partial": "maybe"})
         assert r.status_code == 422 and "partial" in r.text
+
+
+def test_an_open_models_similar_search_stops_at_the_scoring_deadline_and_says_so(collection, monkeypatch):
+    """Past SCORE_BUDGET_S the remaining candidates stay unscored (after the scored ones), and the answer
+    reports the cut, as a piece's upload's does."""
+    from app.services import partial as partial_service
+
+    monkeypatch.setattr(partial_service, "CHUNK", 1)
+    monkeypatch.setattr(partial_service, "SCORE_BUDGET_S", 0.0)
+    data_dir, ids = collection
+    with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
+        r = client.get(f"/models/{ids['half']}/similar", params={"k": "5"})
+        assert r.status_code == 200, r.text
+        work, hits = r.json()["partial"], r.json()["data"]
+        assert work["score_cut"] and work["scored"] == 1 < work["scored_of"]
+        assert hits[0]["forward"] is not None and all(h["forward"] is None for h in hits[1:])
