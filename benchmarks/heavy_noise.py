@@ -1,19 +1,22 @@
-"""Heavy noise on closed shapes: would a rule on folded inputs serve them? (measured, not built)
+"""Heavy noise on closed shapes: what the rule on folded inputs does, from descriptions cached before it.
 
     python -m benchmarks.heavy_noise --cache .cache/describe/<key> var/kinchars-s1@0.01 var/fine@0.01 ...
 
 Each column is a labelled folder described in the cache, with `@NSR` for its noisy queries against the
 clean collection (as benchmarks.fusion_offline reads them). Per query, from its mesh as described:
 
-- fold share: the share of interior edges whose two faces' normals are more than FOLD_ANGLE apart;
-  heavy noise (larger than an edge) folds the surface (docs/results.md: 0.45-0.51 at NSR 1e-2 at full
-  resolution, at most 0.06 on clean meshes of MIN_VERTICES or more);
+- fold share (app.core.roughness.fold_share): the share of interior edges whose two faces' normals are
+  more than 120 degrees apart; heavy noise folds the surface (docs/results.md: 0.45-0.51 at NSR 1e-2
+  at full resolution, at most 0.06 on clean meshes of 100 vertices or more);
 - whether the mesh is watertight (every edge on exactly two faces), and its canonical rim (stored).
 
 A query is *hit* when it is folded (FOLDED or more), its mesh is watertight and its canonical rim is at
-least OPENED: the cleaning opened a closed input. Printed: the served ranking (the fusion re-rank, a
-query with a rim as a piece) and the same with every hit query taken as closed and noisy with a
-Shape-DNA weight of at least W, for a few W; with --any-folded, the rule without the "opened" condition.
+least OPENED: the cleaning opened a closed input. Printed: the ranking served before the rule (the
+fusion re-rank, a query with a rim as a piece) and the same with every hit query taken as closed and
+noisy with a Shape-DNA weight of at least W, for a few W; with --any-folded, without the "opened"
+condition. The service now describes such a query with rim 0 (app.core.pipeline, app.core.roughness.
+opened_by_noise): closed, not a piece, its Shape-DNA weighed as any closed query's (W 1 here, as its
+input noise reads positive); descriptions made since then have the rule already.
 """
 
 from __future__ import annotations
@@ -25,47 +28,13 @@ from pathlib import Path
 import numpy as np
 
 from app.core import fusion
-from app.core.meshdata import Mesh
+from app.core.roughness import FOLDED, fold_share, watertight
 from app.core.vocabulary import Vocabulary
 from app.evaluation import adaptive, sets
 from app.evaluation.cache import Variant, load_variant
 from benchmarks.fusion_offline import Column, _masked, load_column, scores
 
-FOLD_ANGLE = 2 * np.pi / 3  # normals more than 120 degrees apart: the surface folds back on itself
-FOLDED = 0.3  # fold share from which a mesh counts as heavily noisy
 OPENED = 0.05  # canonical rim from which a watertight input counts as opened by the cleaning
-MIN_VERTICES = 100  # fewer: every vertex is a corner (a tetrahedron's edges read 0.33), not measured
-
-
-def edge_faces(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The mesh's edges as sorted vertex pairs (e, 2) and how many faces use each (e,)."""
-    pairs = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    edges, counts = np.unique(pairs, axis=0, return_counts=True)
-    return edges, counts
-
-
-def watertight(mesh: Mesh) -> bool:
-    """Every edge on exactly two faces."""
-    return bool(len(mesh.faces)) and bool((edge_faces(mesh.faces)[1] == 2).all())
-
-
-def fold_share(mesh: Mesh) -> float:
-    """Share of the edges with exactly two faces whose normals are more than FOLD_ANGLE apart; NaN
-    under MIN_VERTICES vertices or with no such edge."""
-    if mesh.n_vertices < MIN_VERTICES or not len(mesh.faces):
-        return float("nan")
-    tri = mesh.vertices[mesh.faces]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
-    pairs = np.sort(mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)  # (3f, 2), face = row // 3
-    _, inverse, counts = np.unique(pairs, axis=0, return_inverse=True, return_counts=True)
-    order = np.argsort(inverse, kind="stable")
-    inner = counts[inverse[order]] == 2  # the two rows of each interior edge are together in `order`
-    rows = order[inner].reshape(-1, 2)
-    if not len(rows):
-        return float("nan")
-    cos = (normals[rows[:, 0] // 3] * normals[rows[:, 1] // 3]).sum(axis=1)
-    return float((cos < np.cos(FOLD_ANGLE)).mean())
 
 
 def hits(col: Column, spec: str, any_folded: bool) -> np.ndarray:
