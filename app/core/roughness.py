@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from app.core.cleaning import edge_uses
 from app.core.decimation import face_normals, vertex_normal_sums
 from app.core.mesh import Mesh
 from app.core.smoothing import LAMBDA, MU, averaging_operator
@@ -107,18 +108,9 @@ FOLD_ANGLE = 2 * np.pi / 3  # two faces whose normals are more than 120 degrees 
 FOLDED = 0.3  # a fold share from which a mesh counts as heavily noisy (docs/results.md)
 
 
-def _edge_rows(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(order (3f,), counts (3f,)): the face-edge rows (row // 3 is the face) grouped by edge, and how
-    many faces use each row's edge."""
-    pairs = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1).astype(np.int64)
-    keys = pairs[:, 0] * (int(faces.max()) + 1) + pairs[:, 1]
-    _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
-    return np.argsort(inverse, kind="stable"), counts[inverse]
-
-
 def watertight(mesh: Mesh) -> bool:
     """Every edge on exactly two faces."""
-    return bool(len(mesh.faces)) and bool((_edge_rows(mesh.faces)[1] == 2).all())
+    return bool(len(mesh.faces)) and bool((edge_uses(mesh.faces)[1] == 2).all())
 
 
 def fold_share(mesh: Mesh) -> float:
@@ -130,8 +122,9 @@ def fold_share(mesh: Mesh) -> float:
         return float("nan")
     normals = face_normals(mesh)
     normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
-    order, counts = _edge_rows(mesh.faces)
-    rows = order[counts[order] == 2].reshape(-1, 2)  # an interior edge's two rows are neighbours in order
+    edge, uses = edge_uses(mesh.faces)
+    order = np.argsort(edge, kind="stable")  # the face-edge rows grouped by edge
+    rows = order[uses[order] == 2].reshape(-1, 2)  # an interior edge's two rows are neighbours in order
     if not len(rows):
         return float("nan")
     cos = (normals[rows[:, 0] // 3] * normals[rows[:, 1] // 3]).sum(axis=1)

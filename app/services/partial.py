@@ -141,10 +141,8 @@ def noise_of(ctx: ServiceContext, model_id: int) -> float | None:
 
 
 def is_partial(query: LocalSignature | None, requested: bool | None) -> bool:
-    """The caller's choice when given, else whether the query has a rim."""
-    if requested is not None:
-        return requested
-    return query is not None and query.rim >= RIM_PARTIAL
+    """The caller's choice when given, else whether the query has a rim (app.core.piece_rank)."""
+    return piece_rank.is_piece(query, requested)
 
 
 def _matches(ctx: ServiceContext, query: LocalSignature, model_ids: Sequence[int],
