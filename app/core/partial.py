@@ -109,20 +109,24 @@ def free_boundary(faces: np.ndarray, n_vertices: int) -> np.ndarray:
 
 
 def rim_length(vertices: np.ndarray, faces: np.ndarray, rim: np.ndarray) -> float:
-    """Length of the rim over √area: the edges between two rim vertices (rim (n,) bool), less those of
-    closed holes' caps (a cap's centre is a rim vertex whose neighbours are all rim). faces (f, 3).
+    """Length of the rim over √area: the edges of exactly one face of the surface, the caps of closed
+    holes left out (a cap's centre is a rim vertex whose neighbours are all rim; a cap's faces are those
+    around it). rim (n,) bool, faces (f, 3).
 
     It is what tells a piece from a whole: a closed surface has none, and a hole closed by a cap still
-    counts, as the cap is not the surface that was there."""
-    edges = np.unique(np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)  # (e, 2)
-    both = rim[edges[:, 0]] & rim[edges[:, 1]]
+    counts, as the cap is not the surface that was there. An edge between two rim vertices that two
+    faces of the surface share is not rim: two punctures side by side are joined by such an edge."""
+    edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
     # a rim vertex with a neighbour off the rim is on a loop; one with none is a cap's centre
     off = np.zeros(len(vertices), dtype=bool)
     for a, b in ((0, 1), (1, 0)):
         off[edges[~rim[edges[:, b]], a]] = True
     centre = rim & ~off
-    loop = both & ~centre[edges[:, 0]] & ~centre[edges[:, 1]]
-    lengths = np.linalg.norm(vertices[edges[loop, 0]] - vertices[edges[loop, 1]], axis=1)
+    surface = faces[~centre[faces].any(axis=1)]
+    undirected = np.sort(surface[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    unique, uses = np.unique(undirected, axis=0, return_counts=True)
+    once = unique[uses == 1]  # (b, 2) the surface's free edges, open or capped
+    lengths = np.linalg.norm(vertices[once[:, 0]] - vertices[once[:, 1]], axis=1)
     area = 0.5 * np.linalg.norm(np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
                                          vertices[faces[:, 2]] - vertices[faces[:, 0]]), axis=1).sum()
     return float(lengths.sum() / np.sqrt(area))

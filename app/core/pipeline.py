@@ -20,7 +20,7 @@ from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import LAPLACIANS, laplacian
 from app.core.mesh import InvalidMeshError, Mesh
 from app.core.packing import pack_float32, unpack_float32
-from app.core.partial import LocalParams, LocalSignature, free_boundary, local_signature
+from app.core.partial import LocalParams, LocalSignature, free_boundary, local_signature, rim_length
 from app.core.remeshing import isotropic_remesh
 from app.core.resolution import SUBDIVISIONS, normalize_scale, to_resolution
 from app.core.roughness import displacement_correlation, opened_by_noise, smooth_until
@@ -296,6 +296,11 @@ def _from_canonical(mesh: Mesh, input_noise: float, fine: Mesh, rim: np.ndarray,
     # remeshing moves the vertices off the canonical mesh's: its rim is the remeshed mesh's open boundary
     rim_now = rim if len(rim) == work.n_vertices else _rim_mask(work.faces, work.n_vertices, work.n_vertices)
     local = local_signature(spectrum, work.vertices, work.faces, mass.diagonal(), rim_now, LOCAL)
+    if local.rim > 0 and rim_now is rim:
+        # the rim's length as resampled, before smoothing: smoothing pulls a puncture's vertices (a face
+        # that decimation collapsed to a point, ~1e-8 across, left open by fill_holes) an edge apart, and
+        # a few such read as a piece's rim (docs/partial.md, "Punctures are not rims")
+        local = replace(local, rim=rim_length(fine.vertices, fine.faces, rim))
     if local.rim > 0 and opened_by_noise(mesh):  # heavy noise folded a closed input open: closed, no piece
         local = replace(local, rim=0.0)
     clock.lap("local")

@@ -107,6 +107,33 @@ def test_a_hole_closed_by_a_cap_keeps_its_rim_length():
         rim_length(mesh.vertices, mesh.faces, rim) * np.sqrt(mesh.area() / closed.area()))
 
 
+def test_an_edge_between_two_holes_is_not_rim():
+    """Two one-face holes joined by an edge that two faces still share: the rim is the two holes'
+    perimeters, not that edge too (the version before counted every edge between two rim vertices)."""
+    ball = trimesh.creation.icosphere(2)
+    v, f = np.asarray(ball.vertices), np.asarray(ball.faces)
+    first = 0
+    joined = None
+    for other in range(1, len(f)):  # a face sharing no vertex with the first, one edge away from it
+        if set(f[other]) & set(f[first]):
+            continue
+        if any({a, b} <= set(f[first]) | set(f[other]) and len({a, b} & set(f[first])) == 1
+               for face in f for a, b in ((face[0], face[1]), (face[1], face[2]), (face[2], face[0]))):
+            joined = other
+            break
+    assert joined is not None
+    holed = np.delete(f, [first, joined], axis=0)
+    rim = free_boundary(holed, len(v))
+    assert rim.sum() == 6
+
+    def perimeter(face: np.ndarray) -> float:
+        return float(sum(np.linalg.norm(v[face[i]] - v[face[(i + 1) % 3]]) for i in range(3)))
+
+    area = Mesh(v, holed).area()
+    expected = (perimeter(f[first]) + perimeter(f[joined])) / np.sqrt(area)
+    assert rim_length(v, holed, rim) == pytest.approx(expected)
+
+
 def test_a_closed_surface_has_no_rim(sphere):
     mesh, _, _ = sphere
     rim = free_boundary(mesh.faces, mesh.n_vertices)
