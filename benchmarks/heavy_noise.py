@@ -14,9 +14,10 @@ A query is *hit* when it is folded (FOLDED or more), its mesh is watertight and 
 least OPENED: the cleaning opened a closed input. Printed: the ranking served before the rule (the
 fusion re-rank, a query with a rim as a piece) and the same with every hit query taken as closed and
 noisy with a Shape-DNA weight of at least W, for a few W; with --any-folded, without the "opened"
-condition. The service now describes such a query with rim 0 (app.core.pipeline, app.core.roughness.
-opened_by_noise): closed, not a piece, its Shape-DNA weighed as any closed query's (W 1 here, as its
-input noise reads positive); descriptions made since then have the rule already.
+condition. From 2026-12-04 the service described such a query with rim 0 (a rule on the fold share);
+the rim measured before smoothing, over free edges only, reads none on them (it fired on 1 of 362
+noisy closed queries, at rim 0.014: docs/partial.md, "Punctures are not rims"), so the rule is gone and
+descriptions made since then have no hit queries: --any-folded tries the weights on them.
 """
 
 from __future__ import annotations

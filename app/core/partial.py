@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from app.core.cleaning import edge_uses
 from app.core.spectrum import Spectrum
 
 
@@ -116,6 +117,8 @@ def rim_length(vertices: np.ndarray, faces: np.ndarray, rim: np.ndarray) -> floa
     It is what tells a piece from a whole: a closed surface has none, and a hole closed by a cap still
     counts, as the cap is not the surface that was there. An edge between two rim vertices that two
     faces of the surface share is not rim: two punctures side by side are joined by such an edge."""
+    if not rim.any():
+        return 0.0
     edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
     # a rim vertex with a neighbour off the rim is on a loop; one with none is a cap's centre
     off = np.zeros(len(vertices), dtype=bool)
@@ -123,9 +126,8 @@ def rim_length(vertices: np.ndarray, faces: np.ndarray, rim: np.ndarray) -> floa
         off[edges[~rim[edges[:, b]], a]] = True
     centre = rim & ~off
     surface = faces[~centre[faces].any(axis=1)]
-    undirected = np.sort(surface[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    unique, uses = np.unique(undirected, axis=0, return_counts=True)
-    once = unique[uses == 1]  # (b, 2) the surface's free edges, open or capped
+    # the surface's free edges, open or capped
+    once = surface[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)[edge_uses(surface)[1] == 1]
     lengths = np.linalg.norm(vertices[once[:, 0]] - vertices[once[:, 1]], axis=1)
     area = 0.5 * np.linalg.norm(np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
                                          vertices[faces[:, 2]] - vertices[faces[:, 0]]), axis=1).sum()
@@ -133,10 +135,13 @@ def rim_length(vertices: np.ndarray, faces: np.ndarray, rim: np.ndarray) -> floa
 
 
 def local_signature(spectrum: Spectrum, vertices: np.ndarray, faces: np.ndarray, mass: np.ndarray,
-                    rim: np.ndarray, params: LocalParams, query: bool = True) -> LocalSignature:
+                    rim: np.ndarray, params: LocalParams, query: bool = True,
+                    measured_rim: float | None = None) -> LocalSignature:
     """Sampled slopes of a mesh. vertices (n, 3) of unit total area, faces (f, 3), mass (n,) lumped
     areas, rim (n,) bool (the vertices on a free boundary or on the cap of a closed hole). query: the
-    longer grid (descriptions always keep it, as a model reads its leading slopes)."""
+    longer grid (descriptions always keep it, as a model reads its leading slopes). measured_rim: the
+    rim's length where the caller measured it (the pipeline: before smoothing, which pulls punctures
+    open); None: rim_length of these vertices."""
     times = params.times(params.shifts - 1 if query else 0)
     slopes = log_slopes(spectrum, times)  # (n, J')
     # slope j spans times j..j+1: trusted where the rim is farther than rim_factor·√t_{j+1}
@@ -148,4 +153,5 @@ def local_signature(spectrum: Spectrum, vertices: np.ndarray, faces: np.ndarray,
     return LocalSignature(slopes=slopes[keep].astype(np.float32),
                           area=(area / area.sum()).astype(np.float32),
                           valid=valid_n[keep].astype(np.int16),
-                          rim=rim_length(vertices, faces, rim), vertex=keep.astype(np.int32))
+                          rim=rim_length(vertices, faces, rim) if measured_rim is None else measured_rim,
+                          vertex=keep.astype(np.int32))

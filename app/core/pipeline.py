@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +23,7 @@ from app.core.packing import pack_float32, unpack_float32
 from app.core.partial import LocalParams, LocalSignature, free_boundary, local_signature, rim_length
 from app.core.remeshing import isotropic_remesh
 from app.core.resolution import SUBDIVISIONS, normalize_scale, to_resolution
-from app.core.roughness import displacement_correlation, opened_by_noise, smooth_until
+from app.core.roughness import displacement_correlation, smooth_until
 from app.core.smoothing import WEIGHTS, taubin
 from app.core.spectrum import SpectrumError, smallest_eigenpairs
 
@@ -295,14 +295,12 @@ def _from_canonical(mesh: Mesh, input_noise: float, fine: Mesh, rim: np.ndarray,
     hks32, weights = h.astype(np.float32), mass.diagonal().astype(np.float32)
     # remeshing moves the vertices off the canonical mesh's: its rim is the remeshed mesh's open boundary
     rim_now = rim if len(rim) == work.n_vertices else _rim_mask(work.faces, work.n_vertices, work.n_vertices)
-    local = local_signature(spectrum, work.vertices, work.faces, mass.diagonal(), rim_now, LOCAL)
-    if local.rim > 0 and rim_now is rim:
-        # the rim's length as resampled, before smoothing: smoothing pulls a puncture's vertices (a face
-        # that decimation collapsed to a point, ~1e-8 across, left open by fill_holes) an edge apart, and
-        # a few such read as a piece's rim (docs/partial.md, "Punctures are not rims")
-        local = replace(local, rim=rim_length(fine.vertices, fine.faces, rim))
-    if local.rim > 0 and opened_by_noise(mesh):  # heavy noise folded a closed input open: closed, no piece
-        local = replace(local, rim=0.0)
+    # the rim's length as resampled, before smoothing: smoothing pulls a puncture's vertices (a face
+    # that decimation collapsed to a point, ~1e-8 across, left open by fill_holes) an edge apart, and a
+    # few such read as a piece's rim (docs/partial.md, "Punctures are not rims")
+    measured = rim_length(fine.vertices, fine.faces, rim) if rim_now is rim and rim.any() else None
+    local = local_signature(spectrum, work.vertices, work.faces, mass.diagonal(), rim_now, LOCAL,
+                            measured_rim=measured)
     clock.lap("local")
     return [
         ShapeDescription(hks=hks32, weights=weights, keypoints=mask, eigenvalues=spectrum.eigenvalues,

@@ -105,7 +105,7 @@ def displacement_correlation(mesh: Mesh) -> float:
 
 
 FOLD_ANGLE = 2 * np.pi / 3  # two faces whose normals are more than 120 degrees apart fold the surface back
-FOLDED = 0.3  # a fold share from which a mesh counts as heavily noisy (docs/results.md)
+FOLDED = 0.3  # a fold share from which a mesh counts as heavily noisy (benchmarks.heavy_noise)
 
 
 def watertight(mesh: Mesh) -> bool:
@@ -129,10 +129,3 @@ def fold_share(mesh: Mesh) -> float:
         return float("nan")
     cos = (normals[rows[:, 0] // 3] * normals[rows[:, 1] // 3]).sum(axis=1)
     return float((cos < np.cos(FOLD_ANGLE)).mean())
-
-
-def opened_by_noise(mesh: Mesh) -> bool:
-    """Whether a watertight mesh is folded by heavy noise (FOLDED): the cleaning of its canonical copy
-    opens it, and its rim is the noise's, not the shape's (a closed character at NSR 1e-2 was taken for
-    a piece and ranked at AP 0.63: docs/results.md)."""
-    return watertight(mesh) and fold_share(mesh) >= FOLDED

@@ -112,16 +112,12 @@ def test_an_edge_between_two_holes_is_not_rim():
     perimeters, not that edge too (the version before counted every edge between two rim vertices)."""
     ball = trimesh.creation.icosphere(2)
     v, f = np.asarray(ball.vertices), np.asarray(ball.faces)
-    first = 0
-    joined = None
-    for other in range(1, len(f)):  # a face sharing no vertex with the first, one edge away from it
-        if set(f[other]) & set(f[first]):
-            continue
-        if any({a, b} <= set(f[first]) | set(f[other]) and len({a, b} & set(f[first])) == 1
-               for face in f for a, b in ((face[0], face[1]), (face[1], face[2]), (face[2], face[0]))):
-            joined = other
-            break
-    assert joined is not None
+    a, b = ball.edges_unique[0]  # the edge that will join the two holes
+
+    def around(x: int, y: int) -> list[int]:  # the faces at x that do not hold y
+        return [int(i) for i in np.flatnonzero((f == x).any(axis=1)) if y not in f[i]]
+
+    first, joined = next((i, j) for i in around(a, b) for j in around(b, a) if not set(f[i]) & set(f[j]))
     holed = np.delete(f, [first, joined], axis=0)
     rim = free_boundary(holed, len(v))
     assert rim.sum() == 6
