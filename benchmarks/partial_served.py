@@ -11,7 +11,8 @@ The models and the chosen pieces are described with the default DescribeParams t
 cache (resumable: an interrupted run keeps what it described), encoded with the shipped vocabulary
 (the fused vector, ranked by L1 as the global index does), and each piece goes through the service's own
 code for a piece (app.services.search._scored: app.services.partial's candidates, their score with
-the mutual share, the order), the local signatures served from memory instead of the blob store, and
+the vote, averaged with their nearest fellow candidates', the order), the local signatures and the stored
+vectors served from memory instead of the blob store and the database, and
 the two deadlines lifted (their wall time is printed instead: a loaded machine would otherwise score
 fewer candidates and make the figures depend on the load). The models that are not candidates follow
 in their global order, so mAP reads the whole ranking.
@@ -111,12 +112,15 @@ class Served:
 
         # MUTUAL in the service only asks match_many for the mutual share (the score reads the core's
         # weight): the share the ranking served before the vote read, for ALTERNATIVES
+        vectors = self.vectors
         with mock.patch.object(partial_mod, "local_of", lambda ctx, model_id: sigs[model_id]), \
+                mock.patch.object(partial_mod, "stored_vectors", lambda ctx, vid, ids: vectors[list(ids)]), \
                 mock.patch.object(partial_mod, "COARSE_BUDGET_S", float("inf")), \
                 mock.patch.object(partial_mod, "SCORE_BUDGET_S", float("inf")), \
                 mock.patch.object(partial_mod, "MUTUAL", 1.0), mock.patch.object(partial_mod, "score", keep):
             t = time.perf_counter()
-            out = search_mod._scored(None, description.local, hits, partial_mod.RERANK, True)  # type: ignore[arg-type]
+            out = search_mod._scored(None, description.local, hits,  # type: ignore[arg-type]
+                                     partial_mod.RERANK, True, vocabulary_id=0)
             self.seconds.append(time.perf_counter() - t)
         return np.array([h.model.id for h in out], dtype=np.int64), out
 
@@ -131,9 +135,10 @@ class Served:
         return out
 
 
-# other scores of the same matches: the mutual share's (served 2026-12-03 to 12-04), the distance alone,
-# the vote at other weights (in CAPs)
+# other scores of the same matches: the own score (served until 2026-12-04, before the peers), the mutual
+# share's (served 2026-12-03 to 12-04), the distance alone, the vote at other weights (in CAPs)
 ALTERNATIVES: dict[str, Callable[[PartialMatch], float]] = {
+    "own score (no peers)": lambda m: m.own,
     "mutual 1 (before)": lambda m: m.distance - CAP * m.mutual,
     "distance alone": lambda m: m.distance,
     "vote x0.25": lambda m: m.distance - 0.25 * CAP * m.vote,

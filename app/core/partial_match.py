@@ -16,7 +16,9 @@ over the candidates of one query). Near everywhere is not enough: a source is th
 many of the query's samples, a class whose limbs resemble everything's is not. MUTUAL x CAP x the
 mutual share (the query's trusted area whose nearest model sample has it as its own nearest query sample)
 was served before the vote; measured on all 30 SHREC'11 classes, the vote alone does better (weight 0:
-docs/partial.md).
+docs/partial.md). That own score is then averaged with the PEERS candidates nearest to the model in the
+global index's space (app.core.piece_rank.with_peers): a piece's source class is a group of models that
+all cover it, while a look-alike of one limb is usually alone among its neighbours.
 Forward and reverse are what a user reads, and `region` where: the share
 of the query's area each model sample matches under the winning scale (what the page's 3D view colours).
 `head` keeps a signature's first samples: a coarser farthest-point sample of the same shape, for a cheap
@@ -38,6 +40,10 @@ CAP = 4 * TOLERANCE  # one unmatched sample costs at most this: a missing part d
 MUTUAL = 0.0  # weight of the mutual share in the score, in CAPs (1.0 before the vote: docs/partial.md)
 VOTE = 0.5  # weight of the vote share in the score, in CAPs (picked on SHREC'11's picking split)
 VOTE_TOP = 10  # a query sample votes for the candidates among its this many nearest
+# a candidate's score is averaged with its PEERS nearest fellow candidates' (by stored fused L1), this
+# much of it theirs (app.core.piece_rank.with_peers; picked on SHREC'11's picking split, docs/partial.md)
+PEERS = 5
+PEER_WEIGHT = 0.5
 
 
 @dataclass(frozen=True)
@@ -49,14 +55,24 @@ class PartialMatch:
     shift: int = 0  # the winning scale hypothesis (the query grid's window), which `region` reads
     mutual: float = 0.0  # the query's trusted area matched one-to-one at that scale (match_many(mutual=True))
     vote: float = 0.0  # the query's trusted area that ranks this model among its VOTE_TOP nearest (votes())
+    # the mean `own` score of this model's PEERS nearest fellow candidates (piece_rank.with_peers); NaN:
+    # not set (no other candidate, or its stored vector unknown), the score is then its own
+    peers: float = float("nan")
     # (p,) each query sample's nearest squared distance at that scale (inf: not trusted there), which
     # votes() compares across candidates; None for a model with no trusted sample
     nearest: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
-    def score(self) -> float:
-        """What a re-ranking orders by, lower first: the distance less the mutual and vote shares' weights."""
+    def own(self) -> float:
+        """This match's own score, lower first: the distance less the mutual and vote shares' weights."""
         return self.distance - MUTUAL * CAP * self.mutual - VOTE * CAP * self.vote
+
+    @property
+    def score(self) -> float:
+        """What a re-ranking orders by, lower first: the own score, averaged with its peers' when set."""
+        if self.peers != self.peers:  # NaN: no peers
+            return self.own
+        return (1.0 - PEER_WEIGHT) * self.own + PEER_WEIGHT * self.peers
 
 
 @dataclass(frozen=True)

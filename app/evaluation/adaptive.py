@@ -54,7 +54,7 @@ def ranks(
                 fixed[skip] = np.inf
             order = np.argsort(fixed, kind="stable")
             order = order[np.isfinite(fixed[order])]  # the left-out shape: last, below
-            served_order = piece_rank.piece_order(local, order, db_locals.__getitem__, LOCAL)
+            served_order = piece_rank.piece_order(local, order, db_locals.__getitem__, LOCAL, vectors=db)
             out[i, np.concatenate([served_order, np.setdiff1d(np.arange(len(db)), served_order)])] = (
                 np.arange(len(db)))
             continue

@@ -7,7 +7,8 @@ COARSE_POINTS samples) among the COARSE_SCAN nearest of the global index: the gl
 piece defeats, and it left the piece's class out of its top 200 for 8 % of SHREC'11's 60-85 % pieces,
 the coarse pass for 1 % (docs/partial.md). The candidates are re-ranked by the local signatures'
 score (app.core.partial_match: the distance less the weight of the share of the query for which the
-candidate is among the VOTE_TOP nearest of the candidates scored): the steps of app.core.piece_rank,
+candidate is among the VOTE_TOP nearest of the candidates scored, averaged with the scores of its
+nearest fellow candidates in the index's space): the steps of app.core.piece_rank,
 run here with the signatures read lazily and a deadline on each pass. A
 closed query keeps the global ranking exactly. Every hit gets
 forward and reverse scores either way.
@@ -30,12 +31,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from app.core import piece_rank
 from app.core.partial import LocalSignature
 from app.core.partial_match import MUTUAL, PartialMatch, Region, head, match_many
 from app.core.partial_match import regions as regions_of
 from app.core.pipeline import LOCAL, load_local_and_noise
 from app.services.context import ServiceContext
+from app.storage import vocabularies as vocab_repo
 
 # the piece's steps and their sizes are app.core.piece_rank's (the evaluation runs the same ones); here
 # they run with the signatures read lazily and a deadline on each pass
@@ -62,7 +66,7 @@ class Work:
     coarse pass: a whole query, or a collection no larger than GLOBAL_KEEP); scored / scored_of: the
     candidates reached by the full scoring of those chosen (a model without a local signature counts as
     reached: it has no score to compute). Fewer read than asked: COARSE_BUDGET_S (SCORE_BUDGET_S) cut it.
-    seconds: per step (coarse, score, vote, regions; search.py adds the hit records)."""
+    seconds: per step (coarse, score, vote, peers, regions; search.py adds the hit records)."""
 
     coarse_read: int = 0
     coarse_of: int = 0
@@ -197,6 +201,33 @@ def score(ctx: ServiceContext, query: LocalSignature | None, model_ids: Sequence
     if work is not None:
         work.scored, work.scored_of = reached, len(model_ids)
         work.seconds.update(score=t_score - t, vote=time.perf_counter() - t_score)
+    return out
+
+
+def stored_vectors(ctx: ServiceContext, vocabulary_id: int, model_ids: Sequence[int]) -> np.ndarray:
+    """(n, d) the models' stored fused vectors under one version, a row of NaN for a model that has none
+    (deleted a moment ago); (n, 0) when none has one."""
+    with ctx.db.read() as conn:
+        found = vocab_repo.vectors_of(conn, vocabulary_id, [int(i) for i in model_ids])
+    if not found:
+        return np.zeros((len(model_ids), 0))
+    width = len(next(iter(found.values())))
+    out = np.full((len(model_ids), width), np.nan)
+    for j, model_id in enumerate(model_ids):
+        if int(model_id) in found:
+            out[j] = found[int(model_id)]
+    return out
+
+
+def with_peers(ctx: ServiceContext, vocabulary_id: int, model_ids: Sequence[int],
+               found: list[PartialMatch | None], work: Work | None = None) -> list[PartialMatch | None]:
+    """The scored candidates' scores averaged with their nearest fellow candidates'
+    (app.core.piece_rank.with_peers), their stored vectors read in one query. work: gets its seconds."""
+    t = time.perf_counter()
+    vectors = stored_vectors(ctx, vocabulary_id, model_ids)
+    out = piece_rank.with_peers(found, vectors) if vectors.shape[1] else list(found)
+    if work is not None:
+        work.seconds["peers"] = time.perf_counter() - t
     return out
 
 

@@ -103,7 +103,7 @@ def search_description(
         t = time.perf_counter()
         found = _hits(ctx, dist, ids, wanted, rerank)
         work = partial_mod.Work(seconds={"records": time.perf_counter() - t})
-        hits = _scored(ctx, description.local, found, k, piece, work)
+        hits = _scored(ctx, description.local, found, k, piece, work, vid)
         seconds = {"encode": t_encode, "search": t_search, "partial": time.perf_counter() - t}
         # the partial stage's steps (hit records, coarse pass, full scoring, vote, regions)
         seconds.update({f"partial.{step}": v for step, v in work.seconds.items()})
@@ -112,11 +112,12 @@ def search_description(
 
 
 def _scored(ctx: ServiceContext, local: LocalSignature | None, hits: list[Hit], k: int,
-            piece: bool, work: partial_mod.Work | None = None) -> list[Hit]:
+            piece: bool, work: partial_mod.Work | None = None, vocabulary_id: int | None = None) -> list[Hit]:
     """The first k hits with their forward / reverse scores against the query's local signature; a
-    piece's candidates (app.services.partial) ordered by partial score (models without a local
-    signature after, in their global order). work: gets how much of the matching was done, and its
-    steps' seconds."""
+    piece's candidates (app.services.partial) ordered by partial score, averaged with their nearest
+    fellow candidates' under the version `vocabulary_id` that ranked them (None: each its own; models
+    without a local signature after, in their global order). work: gets how much of the matching was
+    done, and its steps' seconds."""
     if piece:  # the candidates include the global GLOBAL_KEEP >= k nearest: no other hit is needed
         ids = [h.model.id for h in hits]
         hits = [hits[j] for j in partial_mod.candidates(ctx, local, ids, work)]
@@ -124,6 +125,8 @@ def _scored(ctx: ServiceContext, local: LocalSignature | None, hits: list[Hit], 
         hits = hits[:k]
     found = partial_mod.score(ctx, local, [h.model.id for h in hits], work)
     if piece:
+        if vocabulary_id is not None:
+            found = partial_mod.with_peers(ctx, vocabulary_id, [h.model.id for h in hits], found, work)
         order = piece_rank.by_score(found)
         hits, found = [hits[j] for j in order[:k]], [found[j] for j in order[:k]]
     where: list[Region | None] = [None] * len(hits)
@@ -186,7 +189,7 @@ def similar(
         t = time.perf_counter()
         found = _hits(ctx, dist[keep], ids[keep], int(keep.sum()))
         work = partial_mod.Work(seconds={"records": time.perf_counter() - t})
-        hits = _scored(ctx, local, found, k, True, work)
+        hits = _scored(ctx, local, found, k, True, work, vid)
         seconds["partial"] = time.perf_counter() - t
         seconds.update({f"partial.{step}": v for step, v in work.seconds.items()})
         return SearchResult(hits, vid, seconds, work if local is not None else None)

@@ -188,9 +188,26 @@ def test_a_small_collection_reports_every_candidate_matched_and_nothing_cut(part
         whole = _search(client, _obj(_shapes()["torus"]))
     assert piece["partial"] == {"coarse_read": 0, "coarse_of": 0, "coarse_cut": False,
                                 "scored": len(ids), "scored_of": len(ids), "score_cut": False}
-    assert {"partial.records", "partial.score", "partial.vote", "partial.regions"} <= set(piece["seconds"])
+    assert {"partial.records", "partial.score", "partial.vote", "partial.peers",
+            "partial.regions"} <= set(piece["seconds"])
+    assert "partial.peers" not in whole["seconds"]  # a whole query's hits keep the global order
     assert whole["partial"] == {"coarse_read": 0, "coarse_of": 0, "coarse_cut": False,
                                 "scored": 5, "scored_of": 5, "score_cut": False}
+
+
+def test_a_pieces_scores_meet_their_peers_through_the_stored_vectors(partial_dir, monkeypatch):
+    """The peers' scores read every candidate's stored fused vector (one row each, none missing)."""
+    from app.core import piece_rank
+
+    data_dir, ids = partial_dir
+    seen = []
+    real = piece_rank.with_peers
+    monkeypatch.setattr(piece_rank, "with_peers",
+                        lambda found, vectors, *a: seen.append(np.array(vectors)) or real(found, vectors, *a))
+    with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
+        _search(client, _obj(_half(_shapes()["quadruped"])))
+    assert len(seen) == 1 and seen[0].shape[0] == len(ids) and seen[0].shape[1] > 30
+    assert np.isfinite(seen[0]).all() and len(np.unique(seen[0], axis=0)) == len(ids)
 
 
 def test_a_deadline_that_cuts_the_matching_is_reported(partial_dir, monkeypatch):

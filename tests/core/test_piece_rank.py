@@ -10,6 +10,7 @@ import pytest
 from app.config import DescribeSettings
 from app.core import piece_rank
 from app.core.mesh import Mesh
+from app.core.partial_match import PEER_WEIGHT, PartialMatch
 from app.core.pipeline import LOCAL, describe
 from app.services import partial as partial_service
 from app.services import search as search_service
@@ -64,8 +65,51 @@ def test_the_evaluations_order_is_the_services(signatures, monkeypatch):
     monkeypatch.setattr(partial_service, "local_of", lambda ctx, i: sigs[i])
     monkeypatch.setattr(partial_service, "GLOBAL_KEEP", 2)
     monkeypatch.setattr(partial_service, "COARSE_KEEP", 2)
+    vectors = np.random.default_rng(3).random((len(sigs), 8))  # the stored fused vectors, by model id
+    monkeypatch.setattr(partial_service, "stored_vectors", lambda ctx, vid, ids: vectors[list(ids)])
     order = np.array([5, 4, 3, 2, 1, 0])
     hits = [search_service.Hit(SimpleNamespace(id=int(i)), 0.0, r + 1) for r, i in enumerate(order)]
-    served = search_service._scored(None, half, hits, len(order), True)  # type: ignore[arg-type]
-    ours = piece_rank.piece_order(half, order, sigs.__getitem__, LOCAL, keep=2, coarse_keep=2)
+    served = search_service._scored(None, half, hits, len(order), True,  # type: ignore[arg-type]
+                                    vocabulary_id=1)
+    ours = piece_rank.piece_order(half, order, sigs.__getitem__, LOCAL, keep=2, coarse_keep=2,
+                                  vectors=vectors)
     assert [h.model.id for h in served] == ours[: len(served)].tolist() and len(served) == 4
+
+
+def _own(own: float) -> PartialMatch:
+    """A match whose own score is `own` (no vote, no mutual share)."""
+    return PartialMatch(distance=own, forward=1.0, reverse=1.0, scale=1.0)
+
+
+def test_peers_are_the_mean_own_score_of_the_nearest_fellow_candidates():
+    found = [_own(s) for s in (1.0, 2.0, 4.0, 10.0)]
+    line = np.array([[0.0], [1.0], [3.0], [100.0]])  # L1 between the stored vectors: positions on a line
+    one = piece_rank.with_peers(found, line, count=1)
+    assert [m.peers for m in one] == [2.0, 1.0, 2.0, 4.0]  # each one's nearest; 1 is nearer 0 than 2
+    two = piece_rank.with_peers(found, line, count=2)
+    assert [m.peers for m in two] == [3.0, 2.5, 1.5, 3.0]
+    assert two[0].score == pytest.approx((1 - PEER_WEIGHT) * 1.0 + PEER_WEIGHT * 3.0)
+    assert [m.own for m in two] == [1.0, 2.0, 4.0, 10.0]  # the own score is kept beside the blend
+
+
+def test_a_look_alike_alone_among_its_neighbours_falls_behind_a_group_that_covers_the_piece():
+    """Model 0 scores best alone; models 1-3 are a class (near each other) that all score well: with
+    peers the class comes first, without them model 0 does."""
+    found = [_own(0.10), _own(0.14), _own(0.15), _own(0.16), _own(0.60), _own(0.70)]
+    vectors = np.array([[0.0, 9.0], [5.0, 0.0], [5.1, 0.0], [5.2, 0.0], [0.1, 9.0], [0.2, 9.1]])
+    assert piece_rank.by_score(found)[0] == 0
+    ranked = piece_rank.by_score(piece_rank.with_peers(found, vectors, count=2))
+    assert ranked[:3] == [1, 2, 3] and ranked.index(0) == 3
+
+
+def test_an_unscored_candidate_or_one_without_a_vector_is_nobodys_peer():
+    found = [_own(1.0), None, _own(5.0), _own(3.0)]
+    vectors = np.array([[0.0], [0.5], [np.nan], [2.0]])  # the unscored one is nearest to model 0
+    out = piece_rank.with_peers(found, vectors, count=1)
+    assert out[1] is None
+    assert np.isnan(out[2].peers) and out[2].score == 5.0  # no vector: its own score
+    assert out[0].peers == 3.0 and out[3].peers == 1.0
+    lone = piece_rank.with_peers([_own(1.0), None], np.array([[0.0], [1.0]]))
+    assert np.isnan(lone[0].peers) and lone[0].score == 1.0  # no fellow candidate: its own score
+    with pytest.raises(ValueError):
+        piece_rank.with_peers(found, vectors[:2])

@@ -68,8 +68,8 @@ def test_a_query_with_a_rim_is_ranked_as_a_piece_and_a_closed_one_as_before(monk
 
     seen = {}
 
-    def fake_order(query, order, signature_of, params):
-        seen["order"] = order.copy()
+    def fake_order(query, order, signature_of, params, vectors=None):
+        seen["order"], seen["vectors"] = order.copy(), vectors
         return order[::-1]  # any permutation of the order: the row must follow it
 
     monkeypatch.setattr(piece_rank, "piece_order", fake_order)
@@ -82,6 +82,7 @@ def test_a_query_with_a_rim_is_ranked_as_a_piece_and_a_closed_one_as_before(monk
     without = adaptive.ranks(queries, DB, left_out, 1, 1.0, rule, candidates=2)
     fixed = [j for j in np.argsort(np.abs(DB - queries[0]).sum(1), kind="stable") if j != 0]
     np.testing.assert_array_equal(seen["order"], fixed)  # the global order, the left-out shape not in it
+    np.testing.assert_array_equal(seen["vectors"], DB)  # the stored vectors, for the peers' scores
     np.testing.assert_array_equal(np.argsort(with_locals[0])[:5], fixed[::-1])
     assert with_locals[0, 0] == 5  # left out: last
     np.testing.assert_array_equal(with_locals[1], without[1])
