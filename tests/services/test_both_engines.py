@@ -9,6 +9,7 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.services import catalog, ingestion
+from app.services import partial as partial_service
 from app.services.context import open_context
 from app.services.live_index import LiveIndex
 from app.storage import jobs as jobs_repo
@@ -50,6 +51,11 @@ def test_ingest_rebuild_search_delete(db_url, tmp_path, corpus):  # noqa: F811
         dist2, got2, _ = replica.search(vectors[i], 3)
         np.testing.assert_array_equal(got, got2)
         np.testing.assert_allclose(dist, dist2)
+
+    # a piece's peers read the candidates' stored vectors in one query: in order, NaN for an unknown id
+    got = partial_service.stored_vectors(ctx, vid, [int(ids[1]), 10**9, int(ids[0])])
+    np.testing.assert_array_equal(got[[0, 2]], vectors[[1, 0]])
+    assert np.isnan(got[1]).all()
 
     gone = subs[1].model.id
     catalog.delete_model(ctx, live, gone)  # served by one replica...
