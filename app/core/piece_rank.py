@@ -67,7 +67,7 @@ def with_peers(found: Sequence[PartialMatch | None], vectors: np.ndarray,
               keeps its own score and is nobody's peer)
     Why: the models of a piece's source class are near each other in the global space and all cover
     the piece, so their scores agree; a model of another class that resembles one part of the piece
-    scores well alone among its neighbours (+3.4 to +3.8 mAP on SHREC'11's held-out pieces,
+    scores well alone among its neighbours (+3.4 to +4.2 mAP on SHREC'11's held-out pieces,
     docs/partial.md)."""
     vectors = np.asarray(vectors, dtype=np.float64)
     if vectors.shape[0] != len(found):
