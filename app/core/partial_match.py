@@ -27,6 +27,7 @@ first pass over many models.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -70,7 +71,7 @@ class PartialMatch:
     @property
     def score(self) -> float:
         """What a re-ranking orders by, lower first: the own score, averaged with its peers' when set."""
-        if self.peers != self.peers:  # NaN: no peers
+        if math.isnan(self.peers):  # not set: no peers
             return self.own
         return (1.0 - PEER_WEIGHT) * self.own + PEER_WEIGHT * self.peers
 

@@ -298,7 +298,7 @@ def _from_canonical(mesh: Mesh, input_noise: float, fine: Mesh, rim: np.ndarray,
     # the rim's length as resampled, before smoothing: smoothing pulls a puncture's vertices (a face
     # that decimation collapsed to a point, ~1e-8 across, left open by fill_holes) an edge apart, and a
     # few such read as a piece's rim (docs/partial.md, "Punctures are not rims")
-    measured = rim_length(fine.vertices, fine.faces, rim) if rim_now is rim and rim.any() else None
+    measured = rim_length(fine.vertices, fine.faces, rim) if rim_now is rim else None
     local = local_signature(spectrum, work.vertices, work.faces, mass.diagonal(), rim_now, LOCAL,
                             measured_rim=measured)
     clock.lap("local")

@@ -222,10 +222,17 @@ def stored_vectors(ctx: ServiceContext, vocabulary_id: int, model_ids: Sequence[
 def with_peers(ctx: ServiceContext, vocabulary_id: int, model_ids: Sequence[int],
                found: list[PartialMatch | None], work: Work | None = None) -> list[PartialMatch | None]:
     """The scored candidates' scores averaged with their nearest fellow candidates'
-    (app.core.piece_rank.with_peers), their stored vectors read in one query. work: gets its seconds."""
+    (app.core.piece_rank.with_peers), the stored vectors of those scored (at most RERANK) read in one
+    query: bounded work after the scoring's deadline. work: gets its seconds."""
     t = time.perf_counter()
-    vectors = stored_vectors(ctx, vocabulary_id, model_ids)
-    out = piece_rank.with_peers(found, vectors) if vectors.shape[1] else list(found)
+    scored = [j for j, m in enumerate(found) if m is not None]
+    out = list(found)
+    if len(scored) >= 2:
+        read = stored_vectors(ctx, vocabulary_id, [model_ids[j] for j in scored])
+        if read.shape[1]:
+            vectors = np.full((len(found), read.shape[1]), np.nan)
+            vectors[scored] = read
+            out = piece_rank.with_peers(found, vectors)
     if work is not None:
         work.seconds["peers"] = time.perf_counter() - t
     return out

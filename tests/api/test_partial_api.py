@@ -219,8 +219,13 @@ def test_a_deadline_that_cuts_the_matching_is_reported(partial_dir, monkeypatch)
     monkeypatch.setattr(partial_service, "CHUNK", 1)
     monkeypatch.setattr(partial_service, "COARSE_BUDGET_S", 0.0)
     monkeypatch.setattr(partial_service, "SCORE_BUDGET_S", 0.0)
+    read = []  # the peers read the vectors of the candidates scored, none here past the first
+    real = partial_service.stored_vectors
+    monkeypatch.setattr(partial_service, "stored_vectors",
+                        lambda ctx, vid, model_ids: read.append(list(model_ids)) or real(ctx, vid, model_ids))
     with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
         body = _search(client, _obj(_half(_shapes()["quadruped"])))
+    assert read == []  # one candidate scored: it has no fellow to agree with, nothing is read
     work = body["partial"]
     assert (work["coarse_read"], work["coarse_of"], work["coarse_cut"]) == (1, len(ids), True)
     assert work["scored"] == 1 and work["scored_of"] in (3, 4) and work["score_cut"]

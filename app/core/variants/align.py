@@ -66,10 +66,8 @@ class Similarity:
 
 def hypotheses(fa: Frame, fb: Frame) -> list[np.ndarray]:
     """Candidate rotations (3, 3) in normalised coordinates taking A's principal frame onto B's: the 8
-    sign choices of the axes (4 proper, 4 mirrored), turns about any axis pair whose eigenvalues are
-    too close to order (a cylinder, a cube) in both meshes, and the meshes as they lie (no turn in
-    world coordinates): a copy left in place (a hole punched, a decimation, a repair) whose principal
-    axes moved, because a part of the surface went, is fitted from where it is."""
+    sign choices of the axes (4 proper, 4 mirrored), and turns about any axis pair whose eigenvalues
+    are too close to order (a cylinder, a cube) in both meshes."""
     signs = [np.diag(s) for s in np.array(np.meshgrid([1, -1], [1, -1], [1, -1])).T.reshape(-1, 3)]
     values = np.maximum(0.5 * (fa.values + fb.values), 1e-300)
     gaps = (values[:-1] - values[1:]) / values[:-1]  # (2,) between axes 0-1 and 1-2
@@ -81,8 +79,14 @@ def hypotheses(fa: Frame, fb: Frame) -> list[np.ndarray]:
             axis = np.eye(3)[2 if gaps[0] < DEGENERATE_GAP else 0]  # turn about the distinct axis
             turns = Rotation.from_rotvec(np.outer(np.arange(1, 12) * np.pi / 6, axis)).as_matrix()
         extra = [t @ s for t in turns for s in (signs[0], signs[-1])]
-    as_they_lie = fb.axes.T @ fa.axes  # to_world gives the identity: proper, both frames right-handed
-    return signs + extra + [as_they_lie]
+    return signs + extra
+
+
+def as_they_lie(fa: Frame, fb: Frame) -> np.ndarray:
+    """(3, 3) the rotation in normalised coordinates that to_world turns into no turn at all (proper:
+    both frames are right-handed). A copy left in place (a hole punched, a decimation, a repair) whose
+    principal axes moved, because a part of the surface went, is fitted from where it is."""
+    return fb.axes.T @ fa.axes
 
 
 def icp(

@@ -22,7 +22,15 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from app.core.variants.align import ICP_ITERATIONS, Similarity, hypotheses, icp_batch, to_world, umeyama
+from app.core.variants.align import (
+    ICP_ITERATIONS,
+    Similarity,
+    as_they_lie,
+    hypotheses,
+    icp_batch,
+    to_world,
+    umeyama,
+)
 from app.core.variants.anchors import anchored_fits
 from app.core.variants.gate import RADIUS, may_relate
 from app.core.variants.onesided import LiesOn, cover_margin, side, vertex_subset
@@ -261,15 +269,16 @@ def _choose(refined: list[tuple[float, Similarity]]) -> tuple[float, Similarity]
 def _hypotheses(a: Prepared, b: Prepared, keep: int) -> list[tuple[float, Similarity]]:
     """(ICP cost, fit in normalised coordinates) for each axis hypothesis, proper ones first, each
     handedness by cost. More than 2 `keep` hypotheses are screened on a few points first, and only
-    the best `keep` of each handedness go on, and the meshes as they lie (hypotheses()' last) beside
+    the best `keep` of each handedness go on, and the meshes as they lie (align.as_they_lie) beside
     them: on few points a start as they lie can look better than the axes' right one and displace
     it, so it never competes for those places."""
-    starts = [Similarity(1.0, r, np.zeros(3)) for r in hypotheses(a.frame, b.frame)]
+    axes = [Similarity(1.0, r, np.zeros(3)) for r in hypotheses(a.frame, b.frame)]
+    starts = [*axes, Similarity(1.0, as_they_lie(a.frame, b.frame), np.zeros(3))]
     pts = a.normalised_samples
-    if len(starts) > 2 * keep + 1:
+    if len(axes) > 2 * keep:
         screen = pts[:: max(1, len(pts) // SCREEN_POINTS)]
         fits, costs = icp_batch(screen, b.normalised_tree, b.normalised_samples, starts, iterations=3)
-        order = np.argsort(costs[:-1])  # the axes' hypotheses; the as-they-lie start goes on whatever
+        order = np.argsort(costs[: len(axes)])  # the as-they-lie start (last) goes on whatever its cost
         starts = [fits[i] for i in order if not fits[i].mirrored][:keep] + [
             fits[i] for i in order if fits[i].mirrored][:keep] + [fits[-1]]
     coarse = pts[:: max(1, len(pts) // (COARSE_POINTS_EXACT if keep >= SCREEN_KEEP_EXACT else COARSE_POINTS))]
