@@ -54,6 +54,10 @@ class LocalSignature:
     rim    : float, length of the free boundary over √area (0 for a closed surface)
     vertex : (p,) int32, the vertex each sample is, in the described mesh (the description's vertices,
              which the explain view draws); None in descriptions saved before it was stored
+    level  : (p,) float32, log(t0·K_t0(x, x)) at the grid's first time: the heat's level, which scale does
+             not change (a surface scaled by s read at s²t), where the slopes say only how it falls; the
+             level at a later grid time is this plus the cumulated (slope + 1)·log(ratio). None in
+             descriptions saved before it was stored
     """
 
     slopes: np.ndarray
@@ -61,17 +65,24 @@ class LocalSignature:
     valid: np.ndarray
     rim: float
     vertex: np.ndarray | None = None
+    level: np.ndarray | None = None
 
 
-def log_slopes(spectrum: Spectrum, times: np.ndarray) -> np.ndarray:
-    """(n, len(times) - 1) d log K_t(x, x) / d log t between consecutive times (finite differences).
-
-    K_t(x, x) = Σ_i exp(-λ_i t) φ_i(x)²; on a flat region K ≈ 1/(4πt) and the slope is -1, on a thin
-    tube it tends to -1/2, and it rises to 0 as heat fills a closed shape.
-    """
+def log_heat(spectrum: Spectrum, times: np.ndarray) -> np.ndarray:
+    """(n, len(times)) log K_t(x, x), K_t(x, x) = Σ_i exp(-λ_i t) φ_i(x)²."""
     decay = np.exp(-np.outer(spectrum.eigenvalues, times))  # (k, T)
     k = (spectrum.eigenvectors ** 2) @ decay  # (n, T)
-    logk = np.log(np.maximum(k, np.finfo(float).tiny))
+    return np.log(np.maximum(k, np.finfo(float).tiny))
+
+
+def log_slopes(spectrum: Spectrum, times: np.ndarray, logk: np.ndarray | None = None) -> np.ndarray:
+    """(n, len(times) - 1) d log K_t(x, x) / d log t between consecutive times (finite differences);
+    logk: log_heat(spectrum, times) when the caller has it.
+
+    On a flat region K ≈ 1/(4πt) and the slope is -1, on a thin tube it tends to -1/2, and it rises to 0
+    as heat fills a closed shape.
+    """
+    logk = log_heat(spectrum, times) if logk is None else logk
     return np.diff(logk, axis=1) / np.diff(np.log(times))
 
 
@@ -143,7 +154,8 @@ def local_signature(spectrum: Spectrum, vertices: np.ndarray, faces: np.ndarray,
     rim's length where the caller measured it (the pipeline: before smoothing, which pulls punctures
     open); None: rim_length of these vertices."""
     times = params.times(params.shifts - 1 if query else 0)
-    slopes = log_slopes(spectrum, times)  # (n, J')
+    logk = log_heat(spectrum, times)  # (n, J' + 1)
+    slopes = log_slopes(spectrum, times, logk)  # (n, J')
     # slope j spans times j..j+1: trusted where the rim is farther than rim_factor·√t_{j+1}
     reach = params.rim_factor * np.sqrt(times[1:])  # (J',)
     valid_n = np.searchsorted(reach, rim_distance(vertices, rim), side="left")  # (n,) leading count
@@ -154,4 +166,5 @@ def local_signature(spectrum: Spectrum, vertices: np.ndarray, faces: np.ndarray,
                           area=(area / area.sum()).astype(np.float32),
                           valid=valid_n[keep].astype(np.int16),
                           rim=rim_length(vertices, faces, rim) if measured_rim is None else measured_rim,
-                          vertex=keep.astype(np.int32))
+                          vertex=keep.astype(np.int32),
+                          level=(logk[keep, 0] + np.log(times[0])).astype(np.float32))

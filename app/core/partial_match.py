@@ -45,6 +45,14 @@ VOTE_TOP = 10  # a query sample votes for the candidates among its this many nea
 # much of it theirs (app.core.piece_rank.with_peers; picked on SHREC'11's picking split, docs/partial.md)
 PEERS = 5
 PEER_WEIGHT = 0.5
+# only candidates this near (L1 between stored fused vectors, the shipped vocabulary's space) are peers:
+# a SHREC'11 model's 5th nearest class-mate is within 0.94 for 99 % of them, a unique realworld model's
+# nearest other model is 1.74 away at the median (docs/partial.md)
+PEER_RADIUS = 1.0
+# weight of the squared difference of two samples' levels (LocalSignature.level, at the window's first
+# time) added to their slopes' mean squared difference: the slopes say how fast heat leaves a point, the
+# level how much is there, which tells a spider's leg from an octopus's arm (docs/partial.md)
+LEVEL = 0.03
 
 
 @dataclass(frozen=True)
@@ -94,8 +102,25 @@ def head(signature: LocalSignature, count: int) -> LocalSignature:
     so they are a coarser farthest-point sample of the same surface (their areas are renormalised by
     match_many over the trusted ones)."""
     vertex = None if signature.vertex is None else signature.vertex[:count]
+    level = None if signature.level is None else signature.level[:count]
     return LocalSignature(slopes=signature.slopes[:count], area=signature.area[:count],
-                          valid=signature.valid[:count], rim=signature.rim, vertex=vertex)
+                          valid=signature.valid[:count], rim=signature.rim, vertex=vertex, level=level)
+
+
+def level_at(query: LocalSignature, shift: int, params: LocalParams) -> np.ndarray | None:
+    """(p,) each query sample's level at the first time of window `shift` (the one a model's grid
+    starts at under that scale hypothesis): its level plus the cumulated (slope + 1)·log(ratio), since
+    d log(t·K_t) / d log t = slope + 1. None when the query has no level."""
+    if query.level is None:
+        return None
+    rise = (query.slopes[:, :shift].astype(np.float64) + 1.0).sum(axis=1) * math.log(params.ratio)
+    return query.level.astype(np.float64) + rise
+
+
+def _levels(models: Sequence[LocalSignature], rows: Sequence[np.ndarray]) -> np.ndarray:
+    """(S,) the levels of the models' samples `rows`, stacked; NaN for a model without levels."""
+    return np.concatenate([m.level[r].astype(np.float64) if m.level is not None else np.full(len(r), np.nan)
+                           for m, r in zip(models, rows, strict=True)])
 
 
 def _sq_distances(q: np.ndarray, qvalid: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -109,6 +134,16 @@ def _sq_distances(q: np.ndarray, qvalid: np.ndarray, m: np.ndarray) -> np.ndarra
         d = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * a @ b.T
         out[rows] = np.maximum(d, 0.0) / length
     return out
+
+
+def _add_levels(d: np.ndarray, qlevel: np.ndarray, mlevel: np.ndarray, weight: float) -> None:
+    """d (p, s) += weight x (qlevel (p,) - mlevel (s,))², in place; nothing where mlevel is NaN (a
+    model described before levels were stored is compared on its slopes alone)."""
+    gap = np.subtract.outer(qlevel, mlevel)
+    np.square(gap, out=gap)
+    gap[np.isnan(gap)] = 0.0
+    gap *= weight
+    d += gap
 
 
 def _refine(scores: np.ndarray, best: np.ndarray) -> np.ndarray:
@@ -141,6 +176,7 @@ def match_many(query: LocalSignature, models: Sequence[LocalSignature], params: 
     if len(usable) == 0:
         return [PartialMatch(distance=cap, forward=0.0, reverse=0.0, scale=1.0) for _ in models]
     stacked = np.concatenate([models[i].slopes[kept[i], :width] for i in usable])  # (S, J)
+    levels = _levels([models[i] for i in usable], [kept[i] for i in usable])  # (S,)
     starts = np.concatenate([[0], np.cumsum(counts[usable])[:-1]])
     scores = np.full((shifts, len(usable)), np.inf)
     forwards = np.zeros((shifts, len(usable)))
@@ -151,12 +187,16 @@ def match_many(query: LocalSignature, models: Sequence[LocalSignature], params: 
         if not rows.any():
             continue
         d = _sq_distances(query.slopes[rows, shift:shift + width], qvalid[rows], stacked)  # (p', S)
-        nearest = np.minimum.reduceat(d, starts, axis=1)  # (p', N) per model
-        near[shift, rows] = nearest
         qa = query.area[rows].astype(np.float64)
         qa = qa / qa.sum()
+        # the forward share reads the slopes alone (the tolerance's meaning); the level only ranks
+        forwards[shift] = qa @ (np.minimum.reduceat(d, starts, axis=1) <= tolerance)
+        qlevel = level_at(query, shift, params)
+        if LEVEL > 0 and qlevel is not None:
+            _add_levels(d, qlevel[rows], levels, LEVEL)
+        nearest = np.minimum.reduceat(d, starts, axis=1)  # (p', N) per model
+        near[shift, rows] = nearest
         scores[shift] = qa @ np.minimum(nearest, cap)
-        forwards[shift] = qa @ (nearest <= tolerance)
     best = np.argmin(scores, axis=0)
     finite = np.where(np.isfinite(scores), scores, cap)
     scale = params.ratio ** -_refine(finite, best)

@@ -19,7 +19,7 @@ import numpy as np
 from scipy.spatial.distance import cdist
 
 from app.core.partial import LocalParams, LocalSignature
-from app.core.partial_match import PEERS, PartialMatch, head, match_many, votes
+from app.core.partial_match import PEER_RADIUS, PEERS, PartialMatch, head, match_many, votes
 
 # whole SHREC'11 meshes have no rim (0.0); their 40-85 % pieces at least 0.26 (docs/partial.md)
 RIM_PARTIAL = 0.2
@@ -57,10 +57,11 @@ def voted(query: LocalSignature, found: Sequence[PartialMatch | None],
     return out
 
 
-def with_peers(found: Sequence[PartialMatch | None], vectors: np.ndarray,
-               count: int = PEERS) -> list[PartialMatch | None]:
+def with_peers(found: Sequence[PartialMatch | None], vectors: np.ndarray, count: int = PEERS,
+               radius: float | None = None) -> list[PartialMatch | None]:
     """The matches with `peers` set: the mean own score of each one's `count` nearest fellow scored
-    candidates by L1 between their stored global vectors (the index's metric).
+    candidates by L1 between their stored global vectors (the index's metric), of those within
+    `radius` of it (None: PEER_RADIUS); a match with none that near keeps its own score.
 
     found   : one match (None: unscored) per candidate
     vectors : (n, d) the candidates' stored fused vectors, a row of NaN where unknown (such a candidate
@@ -76,13 +77,16 @@ def with_peers(found: Sequence[PartialMatch | None], vectors: np.ndarray,
     out = list(found)
     if len(scored) < 2 or count < 1:
         return out
+    radius = PEER_RADIUS if radius is None else radius
     own = np.array([m.own for _, m in scored])
     rows = vectors[[j for j, _ in scored]]
     dist = cdist(rows, rows, metric="cityblock")
     np.fill_diagonal(dist, np.inf)
-    near = np.argsort(dist, axis=1, kind="stable")[:, :min(count, len(scored) - 1)]
-    for (j, m), peers in zip(scored, own[near].mean(axis=1), strict=True):
-        out[j] = replace(m, peers=float(peers))
+    near = np.argsort(dist, axis=1, kind="stable")[:, :min(count, len(scored) - 1)]  # (c, count)
+    close = np.take_along_axis(dist, near, axis=1) <= radius
+    for (j, m), peers, ok in zip(scored, own[near], close, strict=True):
+        if ok.any():
+            out[j] = replace(m, peers=float(peers[ok].mean()))
     return out
 
 

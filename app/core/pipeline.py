@@ -163,6 +163,8 @@ class ShapeDescription:
                      "local_valid": self.local.valid, "local_rim": np.asarray(self.local.rim)}
             if self.local.vertex is not None:
                 local["local_vertex"] = self.local.vertex
+            if self.local.level is not None:
+                local["local_level"] = self.local.level
         with open(path, "wb") as fh:
             np.savez_compressed(
                 fh, hks_packed=pack_float32(self.hks), hks_shape=np.asarray(self.hks.shape, dtype=np.int64),
@@ -206,8 +208,9 @@ def _local(z: np.lib.npyio.NpzFile) -> LocalSignature | None:
     if "local_slopes" not in z.files:
         return None
     vertex = z["local_vertex"] if "local_vertex" in z.files else None  # stored since the matched region
+    level = z["local_level"] if "local_level" in z.files else None  # stored since the level's weight
     return LocalSignature(slopes=z["local_slopes"], area=z["local_area"], valid=z["local_valid"],
-                          rim=float(z["local_rim"]), vertex=vertex)
+                          rim=float(z["local_rim"]), vertex=vertex, level=level)
 
 
 def canonical_mesh(mesh: Mesh, params: DescribeParams) -> Mesh:

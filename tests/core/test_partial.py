@@ -17,17 +17,20 @@ from app.core.partial import (
     farthest_points,
     free_boundary,
     local_signature,
+    log_heat,
     log_slopes,
     rim_distance,
     rim_length,
 )
 from app.core.partial_match import (
     CAP,
+    LEVEL,
     MIN_SLOPES,
     MUTUAL,
     VOTE,
     PartialMatch,
     head,
+    level_at,
     match_many,
     mutual_shares,
     region,
@@ -68,6 +71,55 @@ def test_slopes_of_a_scaled_surface_are_the_same_slopes_later():
     s = 1.7
     scaled = log_slopes(Spectrum(lam / s**2, phi / s), times * s**2)
     assert np.allclose(scaled, log_slopes(Spectrum(lam, phi), times), atol=1e-10)
+
+
+def test_a_scaled_surfaces_level_at_its_shift_is_the_level():
+    """log(t·K_t(x, x)) is scale free: a surface scaled by s (s² = ratio^shift, the kept share 1/s²)
+    read `shift` grid steps later has the level the whole has at the grid's start. level_at rebuilds it
+    from the query's level at t0 and its slopes, as match_many reads a scale hypothesis."""
+    rng = np.random.default_rng(1)
+    lam = np.sort(rng.uniform(0, 500, 40))
+    lam[0] = 0.0
+    phi = rng.normal(size=(30, 40))
+    shift = 3
+    s = np.sqrt(PARAMS.ratio ** shift)
+    times = PARAMS.times(PARAMS.shifts - 1)
+
+    def signature(spectrum: Spectrum) -> LocalSignature:
+        logk = log_heat(spectrum, times)
+        return LocalSignature(slopes=log_slopes(spectrum, times, logk), area=np.full(30, 1 / 30),
+                              valid=np.full(30, len(times) - 1, np.int16), rim=0.0,
+                              level=logk[:, 0] + np.log(times[0]))
+
+    whole, scaled = signature(Spectrum(lam, phi)), signature(Spectrum(lam / s**2, phi / s))
+    assert whole.level is not None
+    assert np.allclose(level_at(scaled, shift, PARAMS), whole.level, atol=1e-9)
+    assert np.allclose(level_at(whole, 0, PARAMS), whole.level)
+    # and not at another shift: the level rises by (slope + 1)·log(ratio) a step
+    assert not np.allclose(level_at(scaled, shift - 1, PARAMS), whole.level, atol=1e-3)
+
+
+def test_the_level_ranks_but_the_forward_share_reads_the_slopes():
+    """By hand: two models with the query's slopes, one at its level, one a level of 0.3 higher. The
+    second is further by LEVEL·0.3² (under the cap) and ranks second; both cover the
+    whole query (forward 1: the tolerance reads the slopes alone). A model described before levels
+    were stored is compared on its slopes alone."""
+    width = PARAMS.slopes + PARAMS.shifts - 1
+    # flat (slope -1: K ~ 1/4πt), so the level does not change with the scale hypothesis either
+    slopes = np.full((2, width), -1.0, np.float32)
+    valid = np.array([width, width], np.int16)
+    area = np.array([0.5, 0.5], np.float32)
+    query = LocalSignature(slopes=slopes, area=area, valid=valid, rim=1.0, level=np.array([0.2, 0.2], np.float32))
+    same = LocalSignature(slopes=slopes[:, :PARAMS.slopes], area=area, valid=valid, rim=0.0,
+                          level=np.array([0.2, 0.2], np.float32))
+    higher = replace(same, level=same.level + 0.3)
+    unknown = replace(same, level=None)
+    at, above, bare = match_many(query, [same, higher, unknown], PARAMS)
+    assert LEVEL * 0.09 < CAP
+    assert at.distance == pytest.approx(0.0, abs=1e-12) and at.shift == 0
+    assert above.distance == pytest.approx(LEVEL * 0.09, rel=1e-5)
+    assert bare.distance == pytest.approx(0.0, abs=1e-12)
+    assert at.forward == above.forward == bare.forward == pytest.approx(1.0)
 
 
 def test_slopes_on_a_sphere_go_from_flat_to_filled(sphere):

@@ -10,7 +10,7 @@ import pytest
 from app.config import DescribeSettings
 from app.core import piece_rank
 from app.core.mesh import Mesh
-from app.core.partial_match import PEER_WEIGHT, PartialMatch
+from app.core.partial_match import PEER_RADIUS, PEER_WEIGHT, PartialMatch
 from app.core.pipeline import LOCAL, describe
 from app.services import partial as partial_service
 from app.services import search as search_service
@@ -84,9 +84,9 @@ def _own(own: float) -> PartialMatch:
 def test_peers_are_the_mean_own_score_of_the_nearest_fellow_candidates():
     found = [_own(s) for s in (1.0, 2.0, 4.0, 10.0)]
     line = np.array([[0.0], [1.0], [3.0], [100.0]])  # L1 between the stored vectors: positions on a line
-    one = piece_rank.with_peers(found, line, count=1)
+    one = piece_rank.with_peers(found, line, count=1, radius=np.inf)
     assert [m.peers for m in one] == [2.0, 1.0, 2.0, 4.0]  # each one's nearest; 1 is nearer 0 than 2
-    two = piece_rank.with_peers(found, line, count=2)
+    two = piece_rank.with_peers(found, line, count=2, radius=np.inf)
     assert [m.peers for m in two] == [3.0, 2.5, 1.5, 3.0]
     assert two[0].score == pytest.approx((1 - PEER_WEIGHT) * 1.0 + PEER_WEIGHT * 3.0)
     assert [m.own for m in two] == [1.0, 2.0, 4.0, 10.0]  # the own score is kept beside the blend
@@ -98,14 +98,30 @@ def test_a_look_alike_alone_among_its_neighbours_falls_behind_a_group_that_cover
     found = [_own(0.10), _own(0.14), _own(0.15), _own(0.16), _own(0.60), _own(0.70)]
     vectors = np.array([[0.0, 9.0], [5.0, 0.0], [5.1, 0.0], [5.2, 0.0], [0.1, 9.0], [0.2, 9.1]])
     assert piece_rank.by_score(found)[0] == 0
-    ranked = piece_rank.by_score(piece_rank.with_peers(found, vectors, count=2))
+    ranked = piece_rank.by_score(piece_rank.with_peers(found, vectors, count=2, radius=np.inf))
     assert ranked[:3] == [1, 2, 3] and ranked.index(0) == 3
+
+
+def test_only_candidates_within_the_radius_are_peers():
+    """By hand, on a line: models 0-2 are near each other (a class), model 3 is alone. Within a radius
+    of 1, model 1's peers are 0 and 2 (0.5 and 1.0 away), model 0's and model 2's only model 1 (they
+    are 1.5 apart); model 3 has none and keeps its own score, however good its far neighbours' (a source with no
+    class-mates, as in a library of unique models: docs/partial.md)."""
+    found = [_own(s) for s in (1.0, 2.0, 4.0, 0.5)]
+    line = np.array([[0.0], [0.5], [1.5], [9.0]])
+    out = piece_rank.with_peers(found, line, count=2, radius=1.0)
+    assert [m.peers for m in out[:3]] == [2.0, 2.5, 2.0]
+    assert np.isnan(out[3].peers) and out[3].score == 0.5
+    default = piece_rank.with_peers(found, line, count=2)  # the served radius
+    assert default == piece_rank.with_peers(found, line, count=2, radius=PEER_RADIUS)
+    unlimited = piece_rank.with_peers(found, line, count=2, radius=np.inf)
+    assert unlimited[3].peers == 3.0  # without the radius model 3 takes models 1 and 2's mean
 
 
 def test_an_unscored_candidate_or_one_without_a_vector_is_nobodys_peer():
     found = [_own(1.0), None, _own(5.0), _own(3.0)]
     vectors = np.array([[0.0], [0.5], [np.nan], [2.0]])  # the unscored one is nearest to model 0
-    out = piece_rank.with_peers(found, vectors, count=1)
+    out = piece_rank.with_peers(found, vectors, count=1, radius=np.inf)
     assert out[1] is None
     assert np.isnan(out[2].peers) and out[2].score == 5.0  # no vector: its own score
     assert out[0].peers == 3.0 and out[3].peers == 1.0

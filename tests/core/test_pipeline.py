@@ -254,7 +254,7 @@ def same_local(a: ShapeDescription, b: ShapeDescription) -> bool:
         return a.local is b.local
     return (np.array_equal(a.local.slopes, b.local.slopes) and np.array_equal(a.local.area, b.local.area)
             and np.array_equal(a.local.valid, b.local.valid) and a.local.rim == b.local.rim
-            and np.array_equal(a.local.vertex, b.local.vertex))
+            and np.array_equal(a.local.vertex, b.local.vertex) and np.array_equal(a.local.level, b.local.level))
 
 
 # --- parameters -------------------------------------------------------------------------------------
@@ -434,7 +434,8 @@ def test_a_description_round_trips_through_npz_bit_for_bit(tmp_path):
     with np.load(tmp_path / "d.npz") as z:
         assert sorted(z.files) == [
             "eigenvalues", "format", "hks_packed", "hks_shape", "input_noise", "input_vertices", "keypoints",
-            "local_area", "local_rim", "local_slopes", "local_valid", "local_vertex", "weights"
+            "local_area", "local_level", "local_rim", "local_slopes", "local_valid", "local_vertex",
+            "weights"
         ]
         assert int(z["format"]) == DESCRIPTION_FORMAT == 3
     # of the mesh as given (NaN for the 42-vertex cigar: too few vertices to tell noise from shape)
