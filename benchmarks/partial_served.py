@@ -2,6 +2,7 @@
 
     python -m benchmarks.partial_served SRC NAME=FOLDER... [--per-class 4] [--split held|pick]
            [--cache-dir .cache/describe] [--workers 1] [--ideas] [--json var/served.json]
+           [--level W] [--peer-radius R]
 
 SRC is the labelled folder of whole models (e.g. `shrec11-simplified`), each NAME=FOLDER a set of pieces
 written by benchmarks.partial (labels.csv and partial.csv), e.g. `1cut-60-85=var/p6085`. From each set,
@@ -25,7 +26,9 @@ how many are taken for pieces, and mAP / NN of the ranking they get. The same ca
 ordered by other scores of the same matches (ALTERNATIVES: the mutual share served before the vote, the
 distance alone, other vote weights), per piece in --json for paired comparisons; `--ideas` adds
 rankings from benchmarks.partial_ideas' float32 tables (a check of the service's numbers, and votes
-over other numbers of neighbours).
+over other numbers of neighbours). `--level` and `--peer-radius` replace the served weight of the
+samples' level difference (app.core.partial_match.LEVEL) and the peers' radius
+(app.core.piece_rank.PEER_RADIUS) for the run: how they were picked.
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ from unittest import mock
 
 import numpy as np
 
+from app.core import partial_match, piece_rank
 from app.core.partial import LocalSignature
 from app.core.partial_match import CAP, PartialMatch, match_many
 from app.core.pipeline import LOCAL, DescribeParams, ShapeDescription
@@ -320,7 +324,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--ideas", action="store_true", help="also the mutual + vote rankings (partial_ideas)")
     p.add_argument("--json", type=Path, default=None, help="write every figure here")
+    p.add_argument("--level", type=float, default=None,
+                   help=f"the level's weight in a sample pair's distance (served: {partial_match.LEVEL})")
+    p.add_argument("--peer-radius", type=float, default=None,
+                   help=f"only candidates this near are peers (served: {piece_rank.PEER_RADIUS})")
     a = p.parse_args(argv)
+    if a.level is not None:  # match_many reads the module's weight at each call
+        partial_match.LEVEL = a.level
+    if a.peer_radius is not None:  # with_peers reads piece_rank's name at each call
+        piece_rank.PEER_RADIUS = a.peer_radius
     src = _folder(a.src)
     sets = [(n, _folder(f)) for n, f in (s.split("=", 1) for s in a.sets)]
     rows = read_labelled_folder(src)
@@ -330,7 +342,8 @@ def main(argv: list[str] | None = None) -> int:
     labels = np.array([r.label for r in rows])
     mnames = [r.path.relative_to(src.resolve()).as_posix() for r in rows]
     print(f"{len(rows)} models ({src.name}), {len(set(labels))} classes; {a.per_class} pieces a class a set, "
-          f"split {a.split}; candidates: global {partial_mod.GLOBAL_KEEP} + coarse {partial_mod.COARSE_KEEP}")
+          f"split {a.split}; candidates: global {partial_mod.GLOBAL_KEEP} + coarse {partial_mod.COARSE_KEEP}; "
+          f"level weight {partial_match.LEVEL}, peer radius {piece_rank.PEER_RADIUS}")
     report: dict[str, Any] = {"whole": run_whole(served, labels, descs), "sets": []}
     for name, qdir in sets:
         report["sets"].append(run_set(name, qdir, served, labels, mnames, a.per_class, a.split,

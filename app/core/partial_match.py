@@ -18,7 +18,11 @@ mutual share (the query's trusted area whose nearest model sample has it as its 
 was served before the vote; measured on all 30 SHREC'11 classes, the vote alone does better (weight 0:
 docs/partial.md). That own score is then averaged with the PEERS candidates nearest to the model in the
 global index's space (app.core.piece_rank.with_peers): a piece's source class is a group of models that
-all cover it, while a look-alike of one limb is usually alone among its neighbours.
+all cover it, while a look-alike of one limb is usually alone among its neighbours; only candidates
+within PEER_RADIUS are peers, so a model with no class-mates keeps its own score.
+A pair of samples is compared by their slopes' mean squared difference plus LEVEL x the squared
+difference of their heat levels (LocalSignature.level, the query's read at the window's first time:
+level_at). The forward share and the region read the slopes alone, so the tolerance keeps its meaning.
 Forward and reverse are what a user reads, and `region` where: the share
 of the query's area each model sample matches under the winning scale (what the page's 3D view colours).
 `head` keeps a signature's first samples: a coarser farthest-point sample of the same shape, for a cheap
