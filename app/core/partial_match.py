@@ -53,6 +53,10 @@ PEER_WEIGHT = 0.5
 # a SHREC'11 model's 5th nearest class-mate is within 0.94 for 99 % of them, a unique realworld model's
 # nearest other model is 1.74 away at the median (docs/partial.md)
 PEER_RADIUS = 1.0
+# a candidate this near the query (its partial distance) is a stored copy of it (the same upload, a
+# re-export): it says nothing about which class the piece is from, so it is nobody's peer (a SHREC'11
+# piece's distance to its own whole is 2.9e-4 at the least of 60 measured, docs/partial.md)
+COPY_DISTANCE = 5e-3 * TOLERANCE
 # weight of the squared difference of two samples' levels (LocalSignature.level, at the window's first
 # time) added to their slopes' mean squared difference: the slopes say how fast heat leaves a point, the
 # level how much is there, which tells a spider's leg from an octopus's arm (docs/partial.md)

@@ -19,7 +19,7 @@ import numpy as np
 from scipy.spatial.distance import cdist
 
 from app.core.partial import LocalParams, LocalSignature
-from app.core.partial_match import PEER_RADIUS, PEERS, PartialMatch, head, match_many, votes
+from app.core.partial_match import COPY_DISTANCE, PEER_RADIUS, PEERS, PartialMatch, head, match_many, votes
 
 # whole SHREC'11 meshes have no rim (0.0); their 40-85 % pieces at least 0.26 (docs/partial.md)
 RIM_PARTIAL = 0.2
@@ -61,7 +61,9 @@ def with_peers(found: Sequence[PartialMatch | None], vectors: np.ndarray, count:
                radius: float | None = None) -> list[PartialMatch | None]:
     """The matches with `peers` set: the mean own score of each one's `count` nearest fellow scored
     candidates by L1 between their stored global vectors (the index's metric), of those within
-    `radius` of it (None: PEER_RADIUS); a match with none that near keeps its own score.
+    `radius` of it (None: PEER_RADIUS); a match with none that near keeps its own score. A match
+    within COPY_DISTANCE of the query is a stored copy of it and nobody's peer: its score of about 0
+    would pull its neighbours ahead of the piece's source, whatever their class.
 
     found   : one match (None: unscored) per candidate
     vectors : (n, d) the candidates' stored fused vectors, a row of NaN where unknown (such a candidate
@@ -82,6 +84,7 @@ def with_peers(found: Sequence[PartialMatch | None], vectors: np.ndarray, count:
     rows = vectors[[j for j, _ in scored]]
     dist = cdist(rows, rows, metric="cityblock")
     np.fill_diagonal(dist, np.inf)
+    dist[:, [m.distance <= COPY_DISTANCE for _, m in scored]] = np.inf  # a copy of the query: no peer
     near = np.argsort(dist, axis=1, kind="stable")[:, :min(count, len(scored) - 1)]  # (c, count)
     close = np.take_along_axis(dist, near, axis=1) <= radius
     for (j, m), peers, ok in zip(scored, own[near], close, strict=True):

@@ -10,7 +10,7 @@ import pytest
 from app.config import DescribeSettings
 from app.core import piece_rank
 from app.core.mesh import Mesh
-from app.core.partial_match import PEER_RADIUS, PEER_WEIGHT, PartialMatch
+from app.core.partial_match import COPY_DISTANCE, PEER_RADIUS, PEER_WEIGHT, PartialMatch
 from app.core.pipeline import LOCAL, describe
 from app.services import partial as partial_service
 from app.services import search as search_service
@@ -116,6 +116,18 @@ def test_only_candidates_within_the_radius_are_peers():
     assert default == piece_rank.with_peers(found, line, count=2, radius=PEER_RADIUS)
     unlimited = piece_rank.with_peers(found, line, count=2, radius=np.inf)
     assert unlimited[3].peers == 3.0  # without the radius model 3 takes models 1 and 2's mean
+
+
+def test_a_stored_copy_of_the_query_is_nobodys_peer():
+    """Model 0 is the query itself, stored (partial distance 0): its score of about 0 stays its own, but
+    it does not pull its neighbours (1, 2) ahead of model 3, which its own class-mate 4 backs."""
+    found = [_own(0.0), _own(0.3), _own(0.3), _own(0.2), _own(0.25)]
+    line = np.array([[0.0], [0.4], [0.5], [3.0], [3.2]])
+    out = piece_rank.with_peers(found, line, count=2, radius=1.0)
+    assert out[1].peers == 0.3 and out[2].peers == 0.3  # each other only, not the copy
+    assert out[0].peers == 0.3  # the copy takes its peers' mean ...
+    assert piece_rank.by_score(out)[:2] == [0, 3]  # ... and stays first; the source comes next
+    assert COPY_DISTANCE < 1e-4  # far below a piece's distance to its own whole (2.9e-4 at the least)
 
 
 def test_an_unscored_candidate_or_one_without_a_vector_is_nobodys_peer():
