@@ -60,7 +60,7 @@ from benchmarks.partial_served import described, sample
 from benchmarks.partial_spectra import _folder
 
 STAGES = ("search", "partial.records", "partial.coarse", "partial.score", "partial.vote", "partial.regions")
-SLOPE_JITTER = 0.03  # per slope, added to a synthetic model's copy of a real signature
+SLOPE_JITTER = 0.03  # per slope (and on the level), added to a synthetic model's copy of a real signature
 VECTOR_JITTER = 0.1  # log-normal, per entry of a synthetic model's global vector
 MAX_MIX = 0.3  # a synthetic vector's weight of a second real model
 BATCH = 5000  # synthetic models per transaction
@@ -97,6 +97,8 @@ def _save_signature(path: Path, sig: LocalSignature, input_noise: float) -> None
                              "local_rim": np.asarray(sig.rim)}
     if sig.vertex is not None:
         local["local_vertex"] = sig.vertex
+    if sig.level is not None:
+        local["local_level"] = sig.level
     with open(path, "wb") as fh:
         np.savez_compressed(fh, input_noise=np.float64(input_noise), format=np.int64(DESCRIPTION_FORMAT),
                             **local)
@@ -147,8 +149,11 @@ def store_synthetic(ctx: ServiceContext, rows: Sequence[LabelledFile], descs: Se
                                          sha256=f"synthetic-{seed}-{start + i:08d}", file_type="ply",
                                          size_bytes=0)
                 slopes = src.local.slopes + rng.normal(0.0, SLOPE_JITTER, src.local.slopes.shape)
+                level = None if src.local.level is None else (
+                    src.local.level + rng.normal(0.0, SLOPE_JITTER, src.local.level.shape)).astype(np.float32)
                 sig = LocalSignature(slopes=slopes.astype(np.float32), area=src.local.area,
-                                     valid=src.local.valid, rim=src.local.rim, vertex=src.local.vertex)
+                                     valid=src.local.valid, rim=src.local.rim, vertex=src.local.vertex,
+                                     level=level)
                 _save_signature(ctx.blobs.description_path(mid), sig, src.input_noise)
                 vocab_repo.put_vector(conn, mid, vid, vectors[i].astype(np.float32))
                 models_repo.set_ready(conn, mid, src.input_vertices)
