@@ -12,7 +12,7 @@ import trimesh
 from app.core.cleaning import vertex_components
 from app.core.holes import boundary_loops
 from app.core.mesh import Mesh, load_mesh
-from benchmarks.partial import cut, face_areas, generate, largest_piece, parse_band, punch
+from benchmarks.partial import cut, face_areas, generate, largest_piece, parse_band, punch, scan, visible
 
 BANDS = [(0.60, 0.85), (0.40, 0.60)]
 
@@ -115,3 +115,36 @@ def test_a_sliver_is_an_empty_piece_not_an_error() -> None:
     keep = np.zeros(len(mesh.faces), dtype=bool)
     keep[0] = True
     assert len(largest_piece(mesh, keep).faces) == 0
+
+
+def test_a_viewer_sees_half_a_sphere_and_nothing_behind_a_wall() -> None:
+    """From far along +z a sphere shows the faces of its upper half (its area's half); a second sphere
+    straight below it is hidden, one beside it is seen as the first."""
+    ball = _sphere()
+    up = np.array([0.0, 0.0, 1.0])
+    seen = visible(ball, up)
+    areas = face_areas(ball)
+    assert areas[seen].sum() / areas.sum() == pytest.approx(0.5, abs=0.03)
+    centroids = ball.vertices[ball.faces].mean(axis=1)
+    assert (centroids[seen, 2] > -0.05).all() and (centroids[~seen, 2] < 0.05).all()
+    n = len(ball.vertices)
+    for offset, hidden in (([0.0, 0.0, -3.0], True), ([3.0, 0.0, 0.0], False)):
+        pair = Mesh(np.vstack([ball.vertices, ball.vertices + offset]), np.vstack([ball.faces, ball.faces + n]))
+        lower = visible(pair, up)[len(ball.faces):]
+        # (the faces on the silhouette, where a polygonal sphere's two outlines differ, either way)
+        if hidden:
+            assert lower.sum() < 0.03 * len(lower)
+        else:
+            assert abs(int(lower.sum()) - int(seen.sum())) < 0.03 * len(lower)
+
+
+def test_scans_keep_the_band_and_more_views_see_more() -> None:
+    rng = np.random.default_rng(3)
+    shape = _capsule()
+    total = face_areas(shape).sum()
+    piece, fraction = scan(shape, (0.40, 0.60), rng, 1)
+    assert 0.40 <= fraction <= 0.60
+    assert face_areas(piece).sum() / total == pytest.approx(fraction, abs=2e-4)
+    assert len(boundary_loops(piece.faces, piece.n_vertices)) >= 1  # open: a one-sided scan
+    wider, more = scan(shape, (0.60, 0.95), rng, 3)
+    assert more > fraction
