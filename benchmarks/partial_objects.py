@@ -14,8 +14,9 @@ plates is printed for two indexes:
 - **whole + object rows** (not served): each of a multi-object file's objects
   (app.core.variants.surface.objects, the `--max-objects` largest) is described as a mesh of its own
   and indexed as a row of the file too; a model's distance is the least over its rows.
-It also prints SRC's whole-query mAP against SRC plus the plates under both indexes, the plates left
-out of the scoring (a plate is not a class-mate), so that what object rows cost other queries shows.
+It also prints SRC's whole-query NN and mAP (app.core.metrics) over SRC and the plates under both
+indexes, a plate relevant to a query when it holds a model of the query's class, and how many
+queries' first hit is a plate: what object rows change for queries that are not looking for a plate.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from app.core.mesh import load_mesh
+from app.core.metrics import relevance_scores
 from app.core.variants.surface import objects
 from app.core.vocabulary import Vocabulary
 from app.datasets.folder import LabelledFile, read_labelled_folder
@@ -46,6 +48,7 @@ class Plate:
     base: int  # the base model's index in SRC's rows
     kind: str  # "copies" | "member"
     objects: int  # models placed on it
+    classes: tuple[str, ...]  # the classes of the models placed on it
 
 
 def bases(rows: list[LabelledFile], per_class: int) -> list[int]:
@@ -67,19 +70,22 @@ def build_plates(rows: list[LabelledFile], chosen: list[int], out: Path, seed: i
         copies = int(rng.integers(2, 7))
         pool = [j for j in range(len(rows)) if rows[j].label != rows[b].label]
         count = min(int(rng.integers(1, 4)), len(pool))
-        others = [load_mesh(rows[int(j)].path) for j in rng.choice(pool, count, replace=False)]
-        for kind, mesh, count in (("copies", plate([base] * copies, rng), copies),
-                                  ("member", plate_member(base, others, rng), len(others) + 1)):
+        chosen_others = [int(j) for j in rng.choice(pool, count, replace=False)]
+        others = [load_mesh(rows[j].path) for j in chosen_others]
+        member_classes = (rows[b].label, *(rows[j].label for j in chosen_others))
+        for kind, mesh, count, classes in (("copies", plate([base] * copies, rng), copies, (rows[b].label,)),
+                                           ("member", plate_member(base, others, rng), count + 1, member_classes)):
             name = f"{kind}_{b}.obj"
             (out / name).write_text(_obj_text(mesh))
-            made.append(Plate(name, rows[b].label, b, kind, count))
+            made.append(Plate(name, rows[b].label, b, kind, count, classes))
     _write_labels(out, [(p.file, p.label) for p in made])
     return made
 
 
-def split_objects(plates: list[LabelledFile], out: Path, max_objects: int = MAX_OBJECTS) -> list[int]:
+def split_objects(plates: list[LabelledFile], out: Path,
+                  max_objects: int = MAX_OBJECTS) -> tuple[list[int], list[str]]:
     """Each plate's objects (the `max_objects` largest) written to `out` as meshes of their own, in
-    plate order; the index of the plate each object row belongs to."""
+    plate order: the index of the plate each object row belongs to, and its file name."""
     out.mkdir(parents=True, exist_ok=True)
     owner, names = [], []
     for j, r in enumerate(plates):
@@ -90,7 +96,7 @@ def split_objects(plates: list[LabelledFile], out: Path, max_objects: int = MAX_
             owner.append(j)
             names.append((name, r.label))
     _write_labels(out, names)
-    return owner
+    return owner, [name for name, _ in names]
 
 
 def least_over_rows(query: np.ndarray, whole: np.ndarray, parts: np.ndarray, owner: np.ndarray) -> np.ndarray:
@@ -102,22 +108,23 @@ def least_over_rows(query: np.ndarray, whole: np.ndarray, parts: np.ndarray, own
     return out
 
 
-def mean_average_precision(whole: np.ndarray, parts: np.ndarray, owner: np.ndarray, labels: np.ndarray,
-                           scored: int) -> float:
-    """mAP of the first `scored` models as queries (each leaving itself out) over the first `scored`
-    models: the rows past them (plates) are ranked but never relevant nor counted."""
-    aps = []
-    for i in range(scored):
+def whole_query_scores(whole: np.ndarray, parts: np.ndarray, owner: np.ndarray, labels: np.ndarray,
+                       holds: list[tuple[str, ...]]) -> dict[str, float]:
+    """The first len(labels) models as queries (each leaving itself out) over every row's model:
+    app.core.metrics' NN and mAP, a model relevant when of the query's class and a plate (model
+    len(labels) + j) when holds[j] has it; and "plate first", the share of queries whose first hit is
+    a plate. whole (N, v), parts (P, v), owner (P,) as least_over_rows."""
+    n = len(labels)
+    relevant, plate_first = [], []
+    for i in range(n):
         d = least_over_rows(whole[i], whole, parts, owner)
         d[i] = np.inf
         order = np.argsort(d, kind="stable")[:-1]
-        order = order[order < scored]
-        relevant = labels[order] == labels[i]
-        if not relevant.any():
-            continue
-        hits = np.cumsum(relevant)
-        aps.append(float(np.mean(hits[relevant] / (np.flatnonzero(relevant) + 1))))
-    return float(np.mean(aps))
+        relevant.append([labels[j] == labels[i] if j < n else labels[i] in holds[j - n] for j in order])
+        plate_first.append(order[0] >= n)
+    scores = relevance_scores(np.array(relevant))
+    return {"NN": float(scores["NN"].mean()), "mAP": float(scores["mAP"].mean()),
+            "plate first": float(np.mean(plate_first))}
 
 
 def _write_labels(out: Path, rows: list[tuple[str, str]]) -> None:
@@ -147,12 +154,11 @@ def main(argv: list[str] | None = None) -> int:
     t = time.perf_counter()
     plates = build_plates(rows, bases(rows, a.per_class), a.out)
     plate_rows = _mesh_rows(a.out, [q.file for q in plates])
-    owner = np.array(split_objects(plate_rows, a.out / "objects", a.max_objects), dtype=np.int64)
+    owned, names = split_objects(plate_rows, a.out / "objects", a.max_objects)
+    owner = np.array(owned, dtype=np.int64)
     print(f"{len(plates)} plates of {len(plates) // 2} models, {len(owner)} objects, built in "
           f"{time.perf_counter() - t:.0f} s")
-    object_rows = read_labelled_folder(a.out / "objects")
-    by_name = {r.path.name: r for r in object_rows}
-    object_rows = [by_name[f"{r.path.stem}__o{k}.obj"] for r, k in _object_order(plate_rows, owner)]
+    object_rows = _mesh_rows(a.out / "objects", names)
     vocab = Vocabulary.load(VOCABULARY)
     encode = lambda descs: np.stack([vocab.encode(d) for d in descs]).astype(np.float64)  # noqa: E731
     whole = encode(described(rows, a.cache_dir, a.workers, src.name)
@@ -173,25 +179,17 @@ def main(argv: list[str] | None = None) -> int:
     for (kind, index), v in sorted(ranks.items()):
         r = np.array(v)
         print(f"{kind:8s} {index:20s} {len(r):4d} {np.mean(r == 1):6.3f} {np.mean(r <= 10):6.3f} {np.median(r):11.0f}")
-    labels = np.array([r.label for r in rows] + [q.label for q in plates])
+    labels = np.array([r.label for r in rows])
     for index, (rows_p, owner_p) in (("whole rows", (parts[:0], owner_rows[:0])),
                                      ("whole + object rows", (parts, owner_rows))):
-        print(f"{src.name} whole queries, {index}: mAP "
-              f"{100 * mean_average_precision(whole, rows_p, owner_p, labels, n):.2f}")
+        got = whole_query_scores(whole, rows_p, owner_p, labels, [q.classes for q in plates])
+        print(f"{src.name} whole queries over the models and the plates (a plate relevant when it holds "
+              f"the query's class), {index}: NN {got['NN']:.3f}  mAP {100 * got['mAP']:.2f}  "
+              f"first hit a plate {got['plate first']:.3f}")
     return 0
 
 
-def _object_order(plate_rows: list[LabelledFile], owner: np.ndarray) -> list[tuple[LabelledFile, int]]:
-    """(plate row, object number) of each object row, in split_objects' order."""
-    out, seen = [], {}
-    for j in owner:
-        k = seen.get(int(j), 0)
-        seen[int(j)] = k + 1
-        out.append((plate_rows[int(j)], k))
-    return out
-
-
-__all__ = ["bases", "build_plates", "least_over_rows", "mean_average_precision", "split_objects"]
+__all__ = ["bases", "build_plates", "least_over_rows", "split_objects", "whole_query_scores"]
 
 
 if __name__ == "__main__":

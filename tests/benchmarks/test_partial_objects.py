@@ -24,15 +24,20 @@ def test_a_models_distance_is_the_least_over_its_rows():
     assert po.least_over_rows(np.zeros(2), whole, parts[:0], owner[:0]).tolist() == [0.0, 4.0, 18.0]
 
 
-def test_mean_average_precision_by_hand_with_plates_ranked_but_not_scored():
-    """Labels a, a, b, b on a line at 0, 10, 1, 11: each query's class-mate comes second or third
-    (AP 1/2, 1/3, 1/3, 1/2). A plate row (index 4) near every query changes no rank among the four."""
-    whole = np.array([[0.0], [10.0], [1.0], [11.0], [0.2]])
-    labels = np.array(["a", "a", "b", "b", "a"])
-    got = po.mean_average_precision(whole, whole[:0], np.zeros(0, np.int64), labels, 4)
-    assert got == pytest.approx((1 / 2 + 1 / 3 + 1 / 3 + 1 / 2) / 4)
-    parts = np.array([[10.0], [11.0]])  # the plate's objects sit on models 1 and 3
-    assert po.mean_average_precision(whole, parts, np.array([4, 4]), labels, 4) == pytest.approx(got)
+def test_whole_query_scores_by_hand_with_a_plate_that_holds_a_class():
+    """Labels a, a, b, b on a line at 0, 10, 1, 11, and a plate (model 4) holding an `a`, its whole row
+    far off at 50. Whole rows: APs 1/2, 5/12, 1/3, 1/2 (the plate last, relevant to the a's only).
+    An object row at 0.2 brings the plate first for queries 0 (relevant) and 2 (not): APs 5/6, 5/12,
+    1/4, 1/2."""
+    whole = np.array([[0.0], [10.0], [1.0], [11.0], [50.0]])
+    labels = np.array(["a", "a", "b", "b"])
+    holds = [("a",)]
+    before = po.whole_query_scores(whole, whole[:0], np.zeros(0, np.int64), labels, holds)
+    assert before["mAP"] == pytest.approx((1 / 2 + 5 / 12 + 1 / 3 + 1 / 2) / 4)
+    assert before["NN"] == 0.0 and before["plate first"] == 0.0
+    after = po.whole_query_scores(whole, np.array([[0.2]]), np.array([4]), labels, holds)
+    assert after["mAP"] == pytest.approx((5 / 6 + 5 / 12 + 1 / 4 + 1 / 2) / 4)
+    assert after["NN"] == 0.25 and after["plate first"] == 0.5
 
 
 @pytest.fixture()
@@ -55,10 +60,13 @@ def test_plates_hold_their_base_and_split_into_as_many_objects(folder, tmp_path)
     plates = po.build_plates(rows, chosen, tmp_path / "plates")
     assert [(p.kind, p.base) for p in plates] == [("copies", 1), ("member", 1), ("copies", 2), ("member", 2)]
     assert all(2 <= p.objects <= 6 for p in plates)
+    assert all(p.classes[0] == p.label and len(p.classes) == (1 if p.kind == "copies" else p.objects)
+               for p in plates)
     plate_rows = po._mesh_rows(tmp_path / "plates", [p.file for p in plates])
     for p, row in zip(plates, plate_rows, strict=True):
         assert row.label == rows[p.base].label
         assert len(objects(load_mesh(row.path))) == p.objects  # apart on the grid: one object each
-    owner = po.split_objects(plate_rows, tmp_path / "objects", max_objects=3)
+    owner, names = po.split_objects(plate_rows, tmp_path / "objects", max_objects=3)
     assert owner == sorted(owner) and len(owner) == sum(min(p.objects, 3) for p in plates)
-    assert len(read_labelled_folder(tmp_path / "objects")) == len(owner)
+    assert [r.path.name for r in po._mesh_rows(tmp_path / "objects", names)] == names
+    assert names[0] == f"{plate_rows[owner[0]].path.stem}__o0.obj"
