@@ -73,11 +73,11 @@ def build_plates(rows: list[LabelledFile], chosen: list[int], out: Path, seed: i
         chosen_others = [int(j) for j in rng.choice(pool, count, replace=False)]
         others = [load_mesh(rows[j].path) for j in chosen_others]
         member_classes = (rows[b].label, *(rows[j].label for j in chosen_others))
-        for kind, mesh, count, classes in (("copies", plate([base] * copies, rng), copies, (rows[b].label,)),
-                                           ("member", plate_member(base, others, rng), count + 1, member_classes)):
+        for kind, mesh, held in (("copies", plate([base] * copies, rng), (rows[b].label,) * copies),
+                                 ("member", plate_member(base, others, rng), member_classes)):
             name = f"{kind}_{b}.obj"
             (out / name).write_text(_obj_text(mesh))
-            made.append(Plate(name, rows[b].label, b, kind, count, classes))
+            made.append(Plate(name, rows[b].label, b, kind, len(held), tuple(sorted(set(held)))))
     _write_labels(out, [(p.file, p.label) for p in made])
     return made
 
@@ -178,7 +178,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'plate':8s} {'index':20s} {'n':>4s} {'first':>6s} {'top 10':>6s} {'median rank':>11s}")
     for (kind, index), v in sorted(ranks.items()):
         r = np.array(v)
-        print(f"{kind:8s} {index:20s} {len(r):4d} {np.mean(r == 1):6.3f} {np.mean(r <= 10):6.3f} {np.median(r):11.0f}")
+        print(f"{kind:8s} {index:20s} {len(r):4d} {np.mean(r == 1):6.3f} {np.mean(r <= 10):6.3f} "
+              f"{np.median(r):11.0f}")
     labels = np.array([r.label for r in rows])
     for index, (rows_p, owner_p) in (("whole rows", (parts[:0], owner_rows[:0])),
                                      ("whole + object rows", (parts, owner_rows))):

@@ -51,7 +51,7 @@ from unittest import mock
 import numpy as np
 
 from app.core.partial import LocalSignature
-from app.core.pipeline import DESCRIPTION_FORMAT, DescribeParams, ShapeDescription
+from app.core.pipeline import DESCRIPTION_FORMAT, DescribeParams, ShapeDescription, local_members
 from app.datasets.folder import LabelledFile, read_labelled_folder
 from app.services import partial as partial_mod
 from app.services import search as search_mod
@@ -93,15 +93,9 @@ def _encoder(ctx: ServiceContext) -> tuple[int, Any]:
 
 def _save_signature(path: Path, sig: LocalSignature, input_noise: float) -> None:
     """What load_local_and_noise reads of a description, in ShapeDescription.save's members."""
-    local: dict[str, Any] = {"local_slopes": sig.slopes, "local_area": sig.area, "local_valid": sig.valid,
-                             "local_rim": np.asarray(sig.rim)}
-    if sig.vertex is not None:
-        local["local_vertex"] = sig.vertex
-    if sig.level is not None:
-        local["local_level"] = sig.level
     with open(path, "wb") as fh:
         np.savez_compressed(fh, input_noise=np.float64(input_noise), format=np.int64(DESCRIPTION_FORMAT),
-                            **local)
+                            **local_members(sig))
 
 
 def store_real(ctx: ServiceContext, rows: Sequence[LabelledFile],

@@ -342,8 +342,9 @@ def main(argv: list[str] | None = None) -> int:
     labels = np.array([r.label for r in rows])
     mnames = [r.path.relative_to(src.resolve()).as_posix() for r in rows]
     print(f"{len(rows)} models ({src.name}), {len(set(labels))} classes; {a.per_class} pieces a class a set, "
-          f"split {a.split}; candidates: global {partial_mod.GLOBAL_KEEP} + coarse {partial_mod.COARSE_KEEP}; "
-          f"level weight {partial_match.LEVEL}, peer radius {piece_rank.PEER_RADIUS}")
+          f"split {a.split}; candidates: global {partial_mod.GLOBAL_KEEP} + coarse "
+          f"{partial_mod.COARSE_KEEP}; level weight {partial_match.LEVEL}, "
+          f"peer radius {piece_rank.PEER_RADIUS}")
     report: dict[str, Any] = {"whole": run_whole(served, labels, descs), "sets": []}
     for name, qdir in sets:
         report["sets"].append(run_set(name, qdir, served, labels, mnames, a.per_class, a.split,

@@ -157,14 +157,7 @@ class ShapeDescription:
 
     def save(self, path: str | Path) -> None:
         """Write a .npz (no pickle); the HKS table packed losslessly (app/core/packing.py)."""
-        local: dict[str, Any] = {}
-        if self.local is not None:
-            local = {"local_slopes": self.local.slopes, "local_area": self.local.area,
-                     "local_valid": self.local.valid, "local_rim": np.asarray(self.local.rim)}
-            if self.local.vertex is not None:
-                local["local_vertex"] = self.local.vertex
-            if self.local.level is not None:
-                local["local_level"] = self.local.level
+        local = {} if self.local is None else local_members(self.local)
         with open(path, "wb") as fh:
             np.savez_compressed(
                 fh, hks_packed=pack_float32(self.hks), hks_shape=np.asarray(self.hks.shape, dtype=np.int64),
@@ -191,6 +184,17 @@ class ShapeDescription:
                 eigenvalues=z["eigenvalues"], input_vertices=int(z["input_vertices"]), local=_local(z),
                 input_noise=_input_noise(z),
             )
+
+
+def local_members(local: LocalSignature) -> dict[str, Any]:
+    """The npz members a description stores of its local signature (what _local reads back)."""
+    out: dict[str, Any] = {"local_slopes": local.slopes, "local_area": local.area, "local_valid": local.valid,
+           "local_rim": np.asarray(local.rim)}
+    if local.vertex is not None:
+        out["local_vertex"] = local.vertex
+    if local.level is not None:
+        out["local_level"] = local.level
+    return out
 
 
 def load_local_and_noise(path: str | Path) -> tuple[LocalSignature | None, float]:

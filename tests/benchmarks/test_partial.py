@@ -129,7 +129,8 @@ def test_a_viewer_sees_half_a_sphere_and_nothing_behind_a_wall() -> None:
     assert (centroids[seen, 2] > -0.05).all() and (centroids[~seen, 2] < 0.05).all()
     n = len(ball.vertices)
     for offset, hidden in (([0.0, 0.0, -3.0], True), ([3.0, 0.0, 0.0], False)):
-        pair = Mesh(np.vstack([ball.vertices, ball.vertices + offset]), np.vstack([ball.faces, ball.faces + n]))
+        pair = Mesh(np.vstack([ball.vertices, ball.vertices + offset]),
+                    np.vstack([ball.faces, ball.faces + n]))
         lower = visible(pair, up)[len(ball.faces):]
         # (the faces on the silhouette, where a polygonal sphere's two outlines differ, either way)
         if hidden:

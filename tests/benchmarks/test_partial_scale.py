@@ -19,7 +19,8 @@ from benchmarks import partial_scale
 def _description(rng: np.random.Generator) -> ShapeDescription:
     local = LocalSignature(slopes=rng.normal(-0.6, 0.2, (40, 16)).astype(np.float32),
                            area=np.full(40, 1 / 40, np.float32), valid=np.full(40, 16, np.int16), rim=0.0,
-                           vertex=np.arange(40, dtype=np.int32), level=rng.normal(-2.5, 0.3, 40).astype(np.float32))
+                           vertex=np.arange(40, dtype=np.int32),
+                           level=rng.normal(-2.5, 0.3, 40).astype(np.float32))
     return ShapeDescription(hks=np.zeros((1, 1), np.float32), weights=np.ones(1, np.float32),
                             keypoints=np.zeros(1, bool), eigenvalues=np.zeros(2), input_vertices=500,
                             local=local, input_noise=0.25)

@@ -109,7 +109,8 @@ def test_the_level_ranks_but_the_forward_share_reads_the_slopes():
     slopes = np.full((2, width), -1.0, np.float32)
     valid = np.array([width, width], np.int16)
     area = np.array([0.5, 0.5], np.float32)
-    query = LocalSignature(slopes=slopes, area=area, valid=valid, rim=1.0, level=np.array([0.2, 0.2], np.float32))
+    query = LocalSignature(slopes=slopes, area=area, valid=valid, rim=1.0,
+                           level=np.array([0.2, 0.2], np.float32))
     same = LocalSignature(slopes=slopes[:, :PARAMS.slopes], area=area, valid=valid, rim=0.0,
                           level=np.array([0.2, 0.2], np.float32))
     higher = replace(same, level=same.level + 0.3)

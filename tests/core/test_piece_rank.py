@@ -105,8 +105,8 @@ def test_a_look_alike_alone_among_its_neighbours_falls_behind_a_group_that_cover
 def test_only_candidates_within_the_radius_are_peers():
     """By hand, on a line: models 0-2 are near each other (a class), model 3 is alone. Within a radius
     of 1, model 1's peers are 0 and 2 (0.5 and 1.0 away), model 0's and model 2's only model 1 (they
-    are 1.5 apart); model 3 has none and keeps its own score, however good its far neighbours' (a source with no
-    class-mates, as in a library of unique models: docs/partial.md)."""
+    are 1.5 apart); model 3 has none and keeps its own score, however good its far neighbours' (a source
+    with no class-mates, as in a library of unique models: docs/partial.md)."""
     found = [_own(s) for s in (1.0, 2.0, 4.0, 0.5)]
     line = np.array([[0.0], [0.5], [1.5], [9.0]])
     out = piece_rank.with_peers(found, line, count=2, radius=1.0)

@@ -254,7 +254,8 @@ def same_local(a: ShapeDescription, b: ShapeDescription) -> bool:
         return a.local is b.local
     return (np.array_equal(a.local.slopes, b.local.slopes) and np.array_equal(a.local.area, b.local.area)
             and np.array_equal(a.local.valid, b.local.valid) and a.local.rim == b.local.rim
-            and np.array_equal(a.local.vertex, b.local.vertex) and np.array_equal(a.local.level, b.local.level))
+            and np.array_equal(a.local.vertex, b.local.vertex)
+            and np.array_equal(a.local.level, b.local.level))
 
 
 # --- parameters -------------------------------------------------------------------------------------
