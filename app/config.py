@@ -144,6 +144,9 @@ class Settings(BaseSettings):
     # fused vectors: each whole-shape query re-ranks the index's candidates by a query-adaptive fusion
     # (services/fusion_rerank); a hit's distance stays the index's L1, the re-rank's comes beside it
     fusion_rerank: bool = True
+    # distinct objects of a multi-object file (a print plate, an assembly) described and indexed as rows
+    # of the file too, so that one of its objects finds it (app.core.object_rows); 0: whole rows only
+    object_rows: int = Field(default=8, ge=0, le=32)
     vocabulary_size: int = 64
     vocabulary_run: str = "run5"
     auto_vocabulary_min_models: int = 16  # with no vocabulary, fit one once this many models are ready

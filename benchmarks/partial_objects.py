@@ -17,6 +17,14 @@ plates is printed for two indexes:
 It also prints SRC's whole-query NN and mAP (app.core.metrics) over SRC and the plates under both
 indexes, a plate relevant to a query when it holds a model of the query's class, and how many
 queries' first hit is a plate: what object rows change for queries that are not looking for a plate.
+
+`--served` then measures the same through the service's own code: a data directory with the shipped
+vocabulary, SRC's models and the plates stored as ingestion stores them (the cached descriptions of the
+wholes; each plate's object rows made by app.services.object_rows.describe_objects, timed), and every
+model of SRC asked for its neighbours through app.services.search.similar (the served ranking: fused
+index, object rows merged, the query-adaptive re-rank; k = 100, the rest of the ranking in the index's
+order over whole and object rows). It prints the plates' ranks and the whole-query scores as above,
+for the service with its object rows and with them withheld (SHAPEBAG_OBJECT_ROWS=0).
 """
 
 from __future__ import annotations
@@ -148,6 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-objects", type=int, default=MAX_OBJECTS)
     p.add_argument("--cache-dir", type=Path, default=Path(".cache/describe"))
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--served", action="store_true", help="also measure through the service's own code")
     a = p.parse_args(argv)
     src = _folder(a.src)
     rows = read_labelled_folder(src)
@@ -187,7 +196,89 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{src.name} whole queries over the models and the plates (a plate relevant when it holds "
               f"the query's class), {index}: NN {got['NN']:.3f}  mAP {100 * got['mAP']:.2f}  "
               f"first hit a plate {got['plate first']:.3f}")
+    if a.served:
+        served(rows, plates, plate_rows, a.cache_dir, a.workers)
     return 0
+
+
+def served(rows: list[LabelledFile], plates: list[Plate], plate_rows: list[LabelledFile], cache_dir: Path,
+           workers: int) -> None:
+    """The module docstring's `--served` measurement."""
+    import tempfile
+
+    from app.config import Settings
+    from app.core.pipeline import DescribeParams, describe
+    from app.services import object_rows, search, vocabularies
+    from app.services.context import open_context
+    from app.services.live_index import LiveIndex
+    from benchmarks.partial_scale import _encoder, store_real
+
+    descs = described(rows, cache_dir, workers, "models")
+    descs += described(plate_rows, cache_dir, workers, "plates")
+    with tempfile.TemporaryDirectory(prefix="partial-objects-") as tmp:
+        ctx = open_context(Settings(data_dir=Path(tmp) / "data", dev_mode=True))
+        vocabularies.ensure_default(ctx)
+        params = ctx.settings.describe.params()
+        assert params == DescribeParams(), "the cached descriptions are the service's default describe"
+        ids = store_real(ctx, [*rows, *plate_rows], descs)
+        vid, encode = _encoder(ctx)
+        t, found = time.perf_counter(), []
+        for r in plate_rows:
+            found.append(object_rows.describe_objects(load_mesh(r.path), params, ctx.settings.object_rows))
+        seconds = time.perf_counter() - t
+        t = time.perf_counter()
+        for r in plate_rows:  # the baseline: what the plates' ingest describes without object rows
+            describe(load_mesh(r.path), params)
+        whole_s = time.perf_counter() - t
+        print(f"object rows: {sum(len(f) for f in found)} for {len(plate_rows)} plates "
+              f"({sum(o.row.copies for f in found for o in f)} objects), described in {seconds:.1f} s, "
+              f"the plates' whole describes {whole_s:.1f} s (ratio {seconds / whole_s:.2f})")
+        whole = np.stack([encode(d) for d in descs]).astype(np.float64)
+        part_vectors, owner = [], []
+        with ctx.db.write() as conn:
+            for j, (mid, objs) in enumerate(zip(ids[len(rows):], found, strict=True)):
+                vectors = [encode(o.description) for o in objs]
+                object_rows.store(conn, mid, objs, vid, vectors)
+                part_vectors += vectors
+                owner += [len(rows) + j] * len(objs)
+        parts = np.array(part_vectors, np.float64).reshape(len(owner), whole.shape[1])
+        n = len(rows)
+        labels = np.array([r.label for r in rows])
+        holds = [q.classes for q in plates]
+        for setting, rows_on in (("with object rows (served)", True), ("object rows withheld", False)):
+            live = LiveIndex(ctx)
+            live.refresh()
+            if not rows_on:
+                live.require().objects = None
+            ranked, took = [], []
+            for i in range(n):
+                t = time.perf_counter()
+                hits = search.similar(ctx, live, ids[i], k=search.MAX_K).hits
+                took.append(time.perf_counter() - t)
+                ranked.append(([ids.index(h.model.id) for h in hits], [h.part for h in hits]))
+            ranks: dict[str, list[int]] = {}
+            for j, q in enumerate(plates):
+                order = ranked[q.base][0]
+                ranks.setdefault(q.kind, []).append(order.index(n + j) + 1 if n + j in order else 10**6)
+            for kind, v in sorted(ranks.items()):
+                r = np.array(v)
+                print(f"served, {setting}: plate of {kind:7s} n {len(r)}  first {np.mean(r == 1):.3f}  "
+                      f"top 10 {np.mean(r <= 10):.3f}  in top 100 {np.mean(r <= 100):.3f}")
+            relevant, plate_first, matched = [], [], 0
+            held = (parts, np.array(owner, np.int64)) if rows_on else (parts[:0], np.zeros(0, np.int64))
+            for i, (order, matched_parts) in enumerate(ranked):
+                d = least_over_rows(whole[i], whole, *held)
+                served_now = set(order) | {i}
+                rest = [int(j) for j in np.argsort(d, kind="stable") if int(j) not in served_now]
+                full = order + rest  # beyond the 100 served: the index's order over the rows
+                relevant.append([labels[j] == labels[i] if j < n else labels[i] in holds[j - n]
+                                 for j in full])
+                plate_first.append(order[0] >= n)
+                matched += sum(1 for j, part in zip(order, matched_parts, strict=True) if j >= n and part > 0)
+            scores = relevance_scores(np.array(relevant))
+            print(f"served, {setting}: whole queries NN {scores['NN'].mean():.3f}  mAP "
+                  f"{100 * scores['mAP'].mean():.2f}  first hit a plate {np.mean(plate_first):.3f}  "
+                  f"plate hits through an object {matched}  similar() p50 {1000 * np.median(took):.0f} ms")
 
 
 __all__ = ["bases", "build_plates", "least_over_rows", "split_objects", "whole_query_scores"]

@@ -94,7 +94,8 @@ class ModelAccepted(BaseModel):
 # `timings` holds seconds only. A stored "result" object is taken as it is; these keys are older rows' form.
 # the `partial` option of POST /search and GET /models/{id}/similar
 PARTIAL: dict[str, bool | None] = {"auto": None, "true": True, "false": False}
-JOB_RESULT_KEYS = frozenset({"vocabulary_id", "models", "pruned_versions", "encoded_after_swap", "note"})
+JOB_RESULT_KEYS = frozenset({"vocabulary_id", "models", "object_rows", "pruned_versions",
+                             "encoded_after_swap", "note"})
 
 
 def split_job_timings(stored: dict[str, Any]) -> tuple[dict[str, float], dict[str, Any]]:
@@ -185,6 +186,11 @@ class SearchHit(BaseModel):
     region: MatchedRegion | None = Field(
         None, description="a piece's hits (`partial` true): the region of the model the query matched; null"
         " for a whole query, or a model described before its sample vertices were stored (re-ingest it)"
+    )
+    matched_object: int | None = Field(
+        None, ge=1, description="the model is a multi-object file (a print plate, an assembly) and the query"
+        " matched this one of its objects (1 = its largest distinct object; `distance` is to that object);"
+        " null when the model's whole shape matched (docs/partial.md, \"Parts of multi-object files\")"
     )
     relation: str | None = Field(
         None, description="the verified variant relation of the query to this model, when there is one"

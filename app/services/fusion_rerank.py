@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from app.core import fusion
+from app.core.object_rows import merge_rows
 from app.core.vocabulary import l1_distance
 from app.services.context import ServiceContext
 from app.services.errors import NotReadyError
@@ -36,19 +37,27 @@ def applies(ctx: ServiceContext, live: LiveIndex) -> bool:
 def search(
     ctx: ServiceContext, live: LiveIndex, vector: np.ndarray, k: int, allowed: np.ndarray | None,
     vocabulary_id: int, exclude: int | None = None, rim: float | None = None, noise: float | None = None,
-) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray]:
     """vector (v + c,) fused -> the index's fused L1 distances (<= k,) of the ids (<= k,) in re-ranked
-    order, the version that answered, and the re-rank's distances (<= k,, ascending).
+    order, the version that answered, the re-rank's distances (<= k,, ascending), and the row of each
+    model that matched (<= k,: 0 its whole, p > 0 its object row p; services/object_rows).
     `exclude`: a stored model left out (the one whose neighbours are asked); `rim`: the query's free
     boundary over √area (None: unknown, weighed as an open surface); `noise`: its input's displacement
-    correlation (None or NaN: unknown, weighed as clean)."""
+    correlation (None or NaN: unknown, weighed as clean). A model is a candidate through its nearest
+    row (whole or object), and the re-rank reads that row's vector."""
     pair = live.require()
     if pair.record.id != vocabulary_id or pair.vocabulary.fusion is None:
         raise NotReadyError("the vocabulary changed while the query was encoded; retry")
     scales = pair.vocabulary.fusion
 
+    parts: dict[int, int] = {}  # each candidate's row, the first search's nearest
+
     def nearest(v: np.ndarray, n: int) -> np.ndarray:
-        _, ids, _ = live.search(v, n + (exclude is not None), allowed, vocabulary_id=vocabulary_id)
+        dist, ids, _ = live.search(v, n + (exclude is not None), allowed, vocabulary_id=vocabulary_id)
+        rows = live.search_objects(v, n + (exclude is not None), allowed, vocabulary_id=vocabulary_id)
+        _, ids, found = merge_rows(dist, ids, *rows)
+        for i, part in zip(ids, found, strict=True):
+            parts.setdefault(int(i), int(part))
         return ids[ids != exclude][:n]
 
     seen: dict[int, np.ndarray] = {}  # every candidate's stored vector, read once
@@ -57,6 +66,10 @@ def search(
         with ctx.db.read() as conn:
             found = vocab_repo.vectors_of(conn, vocabulary_id, [int(i) for i in ids if int(i) not in seen])
         seen.update(found)
+        for i in ids:  # a candidate through an object row is compared as that object
+            row = live.object_vector(int(i), parts.get(int(i), 0)) if parts.get(int(i), 0) else None
+            if row is not None and int(i) in seen:
+                seen[int(i)] = row
         found = {int(i): seen[int(i)] for i in ids if int(i) in seen}
         kept = np.array([i for i in ids if int(i) in found], np.int64)  # deleted a moment ago: dropped
         rows = [found[int(i)] for i in kept]
@@ -67,5 +80,6 @@ def search(
     ids, dist = ids[:k], dist[:k]
     stored = np.stack([seen[int(i)] for i in ids]) if len(ids) else np.zeros((0, len(vector)), np.float32)
     index_distance = l1_distance(stored, vector[None])[:, 0]  # the query as sent: what the index ranks by
-    return index_distance.astype(np.float32), ids, vocabulary_id, dist.astype(np.float32)
+    matched = np.array([parts.get(int(i), 0) for i in ids], np.int64)
+    return index_distance.astype(np.float32), ids, vocabulary_id, dist.astype(np.float32), matched
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from app.core.mesh import Mesh, detect_format, load_mesh
 from app.core.pipeline import DescribeParams, ShapeDescription, canonical_with_rim, describe_canonical
-from app.services import variants, views
+from app.services import object_rows, variants, views
 from app.services.clients import current_client
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError, QueueFullError
@@ -117,8 +117,13 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
     data = ctx.blobs.mesh_path(model.sha256, model.file_type).read_bytes()
     mesh = load_mesh(data, model.file_type, max_vertices=ctx.settings.max_vertices)
     timings["load"] = time.perf_counter() - t
-    description, fine = describe_and_view(mesh, ctx.settings.describe.params())
+    params = ctx.settings.describe.params()
+    description, fine = describe_and_view(mesh, params)
     timings.update({f"describe.{k}": v for k, v in description.seconds.items()})
+    t = time.perf_counter()
+    parts = object_rows.describe_objects(mesh, params, ctx.settings.object_rows)  # a plate's objects
+    object_rows.save_descriptions(ctx, model.id, parts)
+    timings["objects"] = time.perf_counter() - t
     found, timings["variants"] = variants.timed_detect(ctx, model.id, mesh)  # advisory: never fails a job
     ctx.blobs.put_description(model.id, description.save)
     views.save_geometry(ctx, model.id, fine)  # what /explain shows, kept now rather than per view
@@ -127,10 +132,12 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
         t = time.perf_counter()
         with ctx.db.read() as conn:
             active = vocab_repo.active(conn)
-        vector = None
+        vector, part_vectors = None, None
         if active is not None:
             vocab = load_vocabulary(ctx, active)
-            vector = vocab.encode(description, version_params(ctx, active, vocab))
+            encoding = version_params(ctx, active, vocab)
+            vector = vocab.encode(description, encoding)
+            part_vectors = [vocab.encode(p.description, encoding) for p in parts]
         timings["encode"] = time.perf_counter() - t
         with ctx.db.write() as conn:
             now_active = vocab_repo.active(conn)
@@ -142,7 +149,9 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
                 return timings
             if active is not None and vector is not None:
                 vocab_repo.put_vector(conn, model.id, active.id, vector)
+            object_rows.store(conn, model.id, parts, None if active is None else active.id, part_vectors)
             models_repo.set_ready(conn, model.id, mesh.n_vertices)
-            jobs_repo.mark_done(conn, job.id, {**timings, "result": {"variants": found}})
+            result = {"variants": found, "object_rows": len(parts)}
+            jobs_repo.mark_done(conn, job.id, {**timings, "result": result})
         return timings
     raise RuntimeError("the active vocabulary kept changing during ingestion")

@@ -21,6 +21,7 @@ from app.services.context import ServiceContext
 from app.services.errors import NotReadyError
 from app.services.vocabularies import encode_missing, load_vocabulary, reencode_version, version_params
 from app.storage import models as models_repo
+from app.storage import objects as objects_repo
 from app.storage import vocabularies as vocab_repo
 from app.storage.vocabularies import VocabularyRecord
 
@@ -36,6 +37,45 @@ class ActivePair:
     params: EncodeParams  # how this version encodes its vectors and the queries (version_params)
     dirty: bool = False
     reconciled: str = ""  # what happened at load: "loaded" | "created" (no vectors yet) | "rebuilt: <why>"
+    objects: ObjectRows | None = None  # the object rows of multi-object files (services/object_rows)
+
+
+class ObjectRows:
+    """The object rows of one version: an exact L1 index over row ids (storage.objects.row_id), and
+    the rows' vectors (the fusion re-rank reads a hit's). Built from the database at load, never saved:
+    only multi-object files have rows, a few per file."""
+
+    def __init__(self, backend: str, dim: int) -> None:
+        self.index = new_index("numpy" if backend == "numpy" else "faiss", dim)
+        self.vectors: dict[int, np.ndarray] = {}
+        self.cursor = 0  # highest object_bof.seq of this version already held
+
+    def add(self, row_ids: np.ndarray, vectors: np.ndarray) -> None:
+        self.index.add(row_ids, vectors)
+        self.vectors.update((int(r), v) for r, v in zip(row_ids, vectors, strict=True))
+
+    def remove_models(self, model_ids: set[int]) -> None:
+        gone = [r for r in self.vectors if r >> objects_repo.PART_BITS in model_ids]
+        if gone:
+            self.index.remove(np.asarray(gone, np.int64))
+            for r in gone:
+                del self.vectors[r]
+
+    def search(self, vector: np.ndarray, k: int, allowed_models: np.ndarray | None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """vector (v,) -> distances (<= k,), model ids (<= k,), parts (<= k,) of the nearest rows."""
+        if not self.vectors:
+            return np.zeros(0, np.float32), np.zeros(0, np.int64), np.zeros(0, np.int64)
+        allowed = None
+        if allowed_models is not None:
+            rows = np.fromiter(self.vectors, np.int64)
+            allowed = rows[np.isin(objects_repo.split_row_ids(rows)[0], allowed_models)]
+            if len(allowed) == 0:
+                return np.zeros(0, np.float32), np.zeros(0, np.int64), np.zeros(0, np.int64)
+        dist, ids = self.index.search(vector.reshape(1, -1), min(k, len(self.vectors)), allowed)
+        keep = ids[0] >= 0
+        models, parts = objects_repo.split_row_ids(ids[0][keep])
+        return dist[0][keep], models, parts
 
 
 class LiveIndex:
@@ -87,7 +127,27 @@ class LiveIndex:
                 log.info("index of vocabulary %d created empty (%s)", record.id, why)
                 reconciled = "created"
             index.save(path)
-        return ActivePair(record, vocab, index, cursor, params, reconciled=reconciled)
+        pair = ActivePair(record, vocab, index, cursor, params, reconciled=reconciled,
+                          objects=ObjectRows(backend, dim))
+        self._follow_objects(pair)
+        return pair
+
+    def _follow_objects(self, pair: ActivePair) -> int:
+        """Add the object rows stored for `pair`'s version since its cursor; returns how many."""
+        rows = pair.objects
+        if rows is None:
+            return 0
+        with self.ctx.db.read() as conn:
+            ids, vectors, cursor = objects_repo.vectors(conn, pair.record.id, rows.cursor)
+        if len(ids) == 0:
+            return 0
+        models = objects_repo.split_row_ids(ids)[0]
+        keep = ~np.isin(models, list(self._deleted)) & (vectors.shape[1] == rows.index.dim)
+        with self._lock:
+            rows.cursor = cursor
+            if keep.any():
+                rows.add(ids[keep], vectors[keep])
+        return int(keep.sum())
 
     def refresh(self) -> int:
         """Follow the database: swap to a newly active version, add newly encoded models.
@@ -118,6 +178,7 @@ class LiveIndex:
                 return pair.index.count
             with self.ctx.db.read() as conn:
                 ids, vectors, cursor = vocab_repo.vectors(conn, record.id, current.cursor)
+            self._follow_objects(current)
             if len(ids) == 0:
                 return 0
             last = {int(i): k for k, i in enumerate(ids)}  # a model re-encoded twice: keep its last row
@@ -135,6 +196,8 @@ class LiveIndex:
             self._deleted.update(int(i) for i in model_ids)
             if self.pair is not None and self.pair.index.remove(np.asarray(model_ids, np.int64)):
                 self.pair.dirty = True
+            if self.pair is not None and self.pair.objects is not None:
+                self.pair.objects.remove_models({int(i) for i in model_ids})
 
     def save(self, force: bool = False) -> bool:
         """Persist the index if it changed (periodically and at shutdown)."""
@@ -179,8 +242,31 @@ class LiveIndex:
         keep = ids[0] >= 0
         return dist[0][keep], ids[0][keep], pair.record.id
 
+    def search_objects(
+        self, vector: np.ndarray, k: int, allowed_ids: np.ndarray | None = None,
+        vocabulary_id: int | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """vector (v,) -> distances (<= k,), model ids (<= k,), parts (<= k,) of the nearest object rows
+        (ObjectRows.search) of the version `vocabulary_id`'s pair."""
+        with self._lock:
+            pair = self.require()
+            if vocabulary_id is not None and vocabulary_id != pair.record.id:
+                raise NotReadyError("the vocabulary changed while the query was encoded; retry")
+            if pair.objects is None:
+                return np.zeros(0, np.float32), np.zeros(0, np.int64), np.zeros(0, np.int64)
+            return pair.objects.search(vector, k, allowed_ids)
+
+    def object_vector(self, model_id: int, part: int) -> np.ndarray | None:
+        """One object row's vector under the active version (None: not held)."""
+        pair = self.pair
+        if pair is None or pair.objects is None:
+            return None
+        return pair.objects.vectors.get(objects_repo.row_id(model_id, part))
+
     def status(self) -> dict:
         pair = self.pair
         if pair is None:
             return {"vocabulary_id": None, "indexed": 0, "words": None}
-        return {"vocabulary_id": pair.record.id, "indexed": pair.index.count, "words": pair.vocabulary.size}
+        objects = 0 if pair.objects is None else len(pair.objects.vectors)
+        return {"vocabulary_id": pair.record.id, "indexed": pair.index.count, "words": pair.vocabulary.size,
+                "object_rows": objects}

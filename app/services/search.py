@@ -8,6 +8,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from app.core import piece_rank
+from app.core.object_rows import merge_rows
 from app.core.partial import LocalSignature
 from app.core.partial_match import Region
 from app.core.pipeline import ShapeDescription
@@ -33,6 +34,7 @@ class Hit:
     partial: bool = False  # ranked by the partial re-ranking
     rerank: float | None = None  # the distance the hits are ordered by (services/fusion_rerank)
     region: Region | None = None  # a piece's: where it matched in the model (app.core.partial_match)
+    part: int = 0  # the model's row that matched: 0 its whole, p > 0 its object row p (services/object_rows)
 
 
 @dataclass(frozen=True)
@@ -59,7 +61,7 @@ def _allowed(ctx: ServiceContext, label: str | None) -> np.ndarray | None:
 
 
 def _hits(ctx: ServiceContext, dist: np.ndarray, ids: np.ndarray, k: int,
-          rerank: np.ndarray | None = None) -> list[Hit]:
+          rerank: np.ndarray | None = None, parts: np.ndarray | None = None) -> list[Hit]:
     with ctx.db.read() as conn:
         records = models_repo.get_many(conn, [int(i) for i in ids])
     hits: list[Hit] = []
@@ -67,8 +69,20 @@ def _hits(ctx: ServiceContext, dist: np.ndarray, ids: np.ndarray, k: int,
         rec = records.get(int(i))
         if rec is not None and len(hits) < k:  # deleted a moment ago: skip
             again = None if rerank is None else float(rerank[j])
-            hits.append(Hit(rec, float(d), len(hits) + 1, rerank=again))
+            part = 0 if parts is None else int(parts[j])
+            hits.append(Hit(rec, float(d), len(hits) + 1, rerank=again, part=part))
     return hits
+
+
+def _rows_search(live: LiveIndex, vector: np.ndarray, k: int, allowed: np.ndarray | None,
+                 vocabulary_id: int) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+    """The index's nearest models over their whole and object rows, a model at its nearest row (the k
+    nearest of each index merged: at least k when the index holds them, the first k the k nearest
+    models; _hits keeps k of those still stored): distances, model ids, the version, the matched rows
+    (0: whole)."""
+    dist, ids, vid = live.search(vector, k, allowed, vocabulary_id=vocabulary_id)
+    dist, ids, parts = merge_rows(dist, ids, *live.search_objects(vector, k, allowed, vocabulary_id=vid))
+    return dist, ids, vid, parts
 
 
 def search_description(
@@ -87,13 +101,15 @@ def search_description(
         vid, vector = live.encode(description)
         t_encode = time.perf_counter() - t
         t = time.perf_counter()
-        rerank = None
+        rerank, parts = None, None
         try:
             if not piece and fusion_rerank.applies(ctx, live):  # a piece is re-ranked by its rim instead
                 rim = None if description.local is None else description.local.rim
-                dist, ids, vid, rerank = fusion_rerank.search(ctx, live, vector, wanted, allowed, vid,
-                                                              rim=rim, noise=description.input_noise)
-            else:
+                dist, ids, vid, rerank, parts = fusion_rerank.search(ctx, live, vector, wanted, allowed, vid,
+                                                                     rim=rim, noise=description.input_noise)
+            elif not piece:
+                dist, ids, vid, parts = _rows_search(live, vector, wanted, allowed, vid)
+            else:  # a piece's candidates are whole models: their local signatures re-rank them
                 dist, ids, vid = live.search(vector, wanted, allowed, vocabulary_id=vid)
         except NotReadyError:
             if live.pair is None:
@@ -101,7 +117,7 @@ def search_description(
             continue
         t_search = time.perf_counter() - t
         t = time.perf_counter()
-        found = _hits(ctx, dist, ids, wanted, rerank)
+        found = _hits(ctx, dist, ids, wanted, rerank, parts)
         work = partial_mod.Work(seconds={"records": time.perf_counter() - t})
         hits = _scored(ctx, description.local, found, k, piece, work, vid)
         seconds = {"encode": t_encode, "search": t_search, "partial": time.perf_counter() - t}
@@ -166,17 +182,17 @@ def similar(
         # its rim (closed or open) and its input's noise (core.fusion): one read, through the LRU
         local = partial_mod.local_of(ctx, model_id)
         piece = partial_mod.is_partial(local, partial)
-        rerank = None
+        rerank, parts = None, None
         try:
             if piece:  # the candidates come from the COARSE_SCAN nearest, as a piece's upload's do
                 dist, ids, vid = live.search(vector, max(k, partial_mod.COARSE_SCAN) + 1, allowed,
                                              vocabulary_id=pair.record.id)
             elif fusion_rerank.applies(ctx, live):
-                dist, ids, vid, rerank = fusion_rerank.search(ctx, live, vector, k, allowed, pair.record.id,
-                                                              model_id, None if local is None else local.rim,
-                                                              partial_mod.noise_of(ctx, model_id))
+                dist, ids, vid, rerank, parts = fusion_rerank.search(
+                    ctx, live, vector, k, allowed, pair.record.id, model_id,
+                    None if local is None else local.rim, partial_mod.noise_of(ctx, model_id))
             else:
-                dist, ids, vid = live.search(vector, k + 1, allowed, vocabulary_id=pair.record.id)
+                dist, ids, vid, parts = _rows_search(live, vector, k + 1, allowed, pair.record.id)
         except NotReadyError:
             if live.pair is None:
                 raise
@@ -184,7 +200,8 @@ def similar(
         keep = ids != model_id
         seconds = {"search": time.perf_counter() - t}
         if not piece:
-            hits = _hits(ctx, dist[keep], ids[keep], k, None if rerank is None else rerank[keep])
+            hits = _hits(ctx, dist[keep], ids[keep], k, None if rerank is None else rerank[keep],
+                         None if parts is None else parts[keep])
             return SearchResult(hits, vid, seconds)
         t = time.perf_counter()
         found = _hits(ctx, dist[keep], ids[keep], int(keep.sum()))

@@ -16,10 +16,12 @@ from app.core.fusion import DEFAULT_WEIGHT
 from app.core.pipeline import DescribeParams, ShapeDescription
 from app.core.vocabulary import EncodeParams, Vocabulary
 from app.index import new_index
+from app.services import object_rows
 from app.services.context import ServiceContext
 from app.services.errors import InvalidInputError
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
+from app.storage import objects as objects_repo
 from app.storage import vocabularies as vocab_repo
 from app.storage.vocabularies import VocabularyRecord
 
@@ -228,11 +230,16 @@ def rebuild_vocabulary(
     index.save(ctx.index_path(vid))
     timings["encode_and_index"] = time.perf_counter() - t
     keep_alive()
+    with ctx.db.read() as conn:
+        parts = objects_repo.ready_parts(conn, ids)
+    part_rows = object_rows.encode_parts(ctx, vocab, params, parts)  # a plate's objects, as its whole
+    keep_alive()
     with ctx.db.write() as conn:  # the swap: vectors + active flag in ONE transaction
         alive = set(models_repo.get_many(conn, ids))
         for mid, vec in zip(ids, vectors, strict=True):
             if mid in alive:  # deleted during the rebuild: skip
                 vocab_repo.put_vector(conn, mid, vid, vec)
+        object_rows.store_vectors(conn, vid, part_rows)
         replaced = vocab_repo.active(conn)
         vocab_repo.activate(conn, vid)
         stale = stale_versions(vocab_repo.all_versions(conn), vid, replaced)
@@ -269,20 +276,25 @@ def remove_version_files(ctx: ServiceContext, vocabulary_ids: list[int]) -> None
 
 
 def encode_missing(ctx: ServiceContext, vocabulary_id: int) -> list[int]:
-    """Encode ready models that have no BoF for this version yet; returns their ids."""
+    """Encode ready models that have no BoF for this version yet (and object rows without one);
+    returns the models' ids."""
     with ctx.db.read() as conn:
         record = vocab_repo.get(conn, vocabulary_id)
         missing = vocab_repo.ready_without_vector(conn, vocabulary_id)
-    if record is None or not missing:
+        parts = objects_repo.parts_without_vector(conn, vocabulary_id) if record is not None else []
+    if record is None or not (missing or parts):
         return []
     vocab = load_vocabulary(ctx, record)
+    params = version_params(ctx, record, vocab)
     ids, descs = load_descriptions(ctx, missing)
-    vectors = encode_all(vocab, descs, version_params(ctx, record, vocab))
+    vectors = encode_all(vocab, descs, params)
+    part_rows = object_rows.encode_parts(ctx, vocab, params, parts)
     with ctx.db.write() as conn:
         alive = set(models_repo.get_many(conn, ids))
         for mid, vec in zip(ids, vectors, strict=True):
             if mid in alive:
                 vocab_repo.put_vector(conn, mid, vocabulary_id, vec)
+        object_rows.store_vectors(conn, vocabulary_id, part_rows)
     return ids
 
 
@@ -298,9 +310,12 @@ def reencode_active(ctx: ServiceContext, job_id: int) -> dict:
     if record is None:
         raise InvalidInputError("no active vocabulary: rebuild the vocabulary first")
     ids, vectors = encode_version(ctx, record, ids)
-    timings = {"encode": time.perf_counter() - t, "models": len(ids), "vocabulary_id": record.id}
+    part_rows = encode_version_parts(ctx, record, ids)
+    timings = {"encode": time.perf_counter() - t, "models": len(ids), "vocabulary_id": record.id,
+               "object_rows": len(part_rows)}
     with ctx.db.write() as conn:
         store_vectors(conn, record.id, ids, vectors)
+        object_rows.store_vectors(conn, record.id, part_rows)
         jobs_repo.mark_done(conn, job_id, timings)
     return timings
 
@@ -312,6 +327,18 @@ def encode_version(
     vocab = load_vocabulary(ctx, record)
     ids, descs = load_descriptions(ctx, model_ids)
     return ids, encode_all(vocab, descs, version_params(ctx, record, vocab))
+
+
+def encode_version_parts(
+    ctx: ServiceContext, record: VocabularyRecord, model_ids: list[int]
+) -> list[tuple[int, int, np.ndarray]]:
+    """The object rows of `model_ids` encoded with version `record`: (model id, part, vector) each."""
+    with ctx.db.read() as conn:
+        parts = objects_repo.ready_parts(conn, model_ids)
+    if not parts:
+        return []
+    vocab = load_vocabulary(ctx, record)
+    return object_rows.encode_parts(ctx, vocab, version_params(ctx, record, vocab), parts)
 
 
 def store_vectors(conn: sqlite3.Connection, vocabulary_id: int, ids: list[int], vectors: np.ndarray) -> None:
@@ -328,11 +355,16 @@ def reencode_version(ctx: ServiceContext, record: VocabularyRecord) -> int:
     with ctx.db.read() as conn:
         ready = models_repo.ready_ids(conn)
     ids, vectors = encode_version(ctx, record, ready)
+    part_rows = encode_version_parts(ctx, record, ids)
     lost = sorted(set(ready) - set(ids))  # no cached description: cannot be encoded again
     with ctx.db.write() as conn:
         store_vectors(conn, record.id, ids, vectors)
+        for mid in ids:  # object rows of another length would break the objects' index likewise
+            objects_repo.delete_vectors(conn, mid, record.id)
+        object_rows.store_vectors(conn, record.id, part_rows)
         for mid in lost:  # an old vector of another length beside the new ones would break the index
             vocab_repo.delete_vector(conn, mid, record.id)
+            objects_repo.delete_vectors(conn, mid, record.id)
     if lost:
         log.warning("%d model(s) without a cached description leave version %d's index until ingested "
                     "again: %s", len(lost), record.id, ", ".join(map(str, lost[:10])))

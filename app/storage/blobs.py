@@ -63,8 +63,9 @@ class BlobStore:
             atomic_write(path, data)
         return digest, path
 
-    def description_path(self, model_id: int) -> Path:
-        return self.root / "descriptions" / f"{model_id}.npz"
+    def description_path(self, model_id: int, part: int = 0) -> Path:
+        """descriptions/<id>.npz, or <id>.o<part>.npz for an object row's (storage/objects.py)."""
+        return self.root / "descriptions" / (f"{model_id}.npz" if part == 0 else f"{model_id}.o{part}.npz")
 
     def thumbnail_path(self, model_id: int, size: int) -> Path:
         return self.root / "thumbnails" / f"{model_id}-{size}.png"
@@ -90,9 +91,14 @@ class BlobStore:
             atomic_write(path, data)
         return path
 
-    def put_description(self, model_id: int, write: Callable[[Path], None]) -> Path:
-        """Cache a model's description: `write(tmp_path)` writes it (ShapeDescription.save)."""
-        return atomic_write(self.description_path(model_id), write)
+    def put_description(self, model_id: int, write: Callable[[Path], None], part: int = 0) -> Path:
+        """Cache a model's description (`part` > 0: one of its object rows'): `write(tmp_path)` writes it
+        (ShapeDescription.save)."""
+        return atomic_write(self.description_path(model_id, part), write)
+
+    def object_description_paths(self, model_id: int) -> list[Path]:
+        """This host's files of a model's object-row descriptions."""
+        return sorted((self.root / "descriptions").glob(f"{model_id}.o*.npz"))
 
     def share_dir(self, directory: Path, conn: Any = None) -> None:
         """Let other hosts read the files of `directory` (under root; a vocabulary version): on a
@@ -123,6 +129,7 @@ class BlobStore:
         """Bytes one model holds here: its mesh file, description, cached thumbnails and kept views (this
         host's files only: the database backend's fetch-on-read would write to answer)."""
         paths = [BlobStore.mesh_path(self, sha256, file_type), BlobStore.description_path(self, model_id)]
+        paths += BlobStore.object_description_paths(self, model_id)
         paths += (self.root / "thumbnails").glob(f"{model_id}-*.png")
         paths += (self.root / "views").glob(f"{model_id}.*")
         total = 0
@@ -142,4 +149,6 @@ class BlobStore:
         if sha256 is not None:
             self.mesh_path(sha256, file_type).unlink(missing_ok=True)
         self.description_path(model_id).unlink(missing_ok=True)
+        for path in self.object_description_paths(model_id):
+            path.unlink(missing_ok=True)
         self.delete_views(model_id)

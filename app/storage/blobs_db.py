@@ -34,8 +34,12 @@ def mesh_key(sha256: str, file_type: str) -> str:
     return f"meshes/{sha256}.{file_type}"
 
 
-def description_key(model_id: int) -> str:
-    return f"descriptions/{model_id}.npz"
+def description_key(model_id: int, part: int = 0) -> str:
+    return f"descriptions/{model_id}.npz" if part == 0 else f"descriptions/{model_id}.o{part}.npz"
+
+
+def object_descriptions_prefix(model_id: int) -> str:
+    return f"descriptions/{model_id}.o"
 
 
 def store(conn: Any, key: str, data: bytes, replace: bool) -> None:
@@ -74,8 +78,8 @@ class DatabaseBlobStore(BlobStore):
     def mesh_path(self, sha256: str, file_type: str) -> Path:
         return self._cached(super().mesh_path(sha256, file_type), mesh_key(sha256, file_type))
 
-    def description_path(self, model_id: int) -> Path:
-        return self._cached(super().description_path(model_id), description_key(model_id))
+    def description_path(self, model_id: int, part: int = 0) -> Path:
+        return self._cached(super().description_path(model_id, part), description_key(model_id, part))
 
     def put_mesh(self, data: bytes, file_type: str) -> tuple[str, Path]:
         # this host's copy only: the shared one is written by ensure_mesh, inside the model's transaction
@@ -96,10 +100,10 @@ class DatabaseBlobStore(BlobStore):
             atomic_write(path, data)
         return path
 
-    def put_description(self, model_id: int, write: Callable[[Path], None]) -> Path:
-        path = atomic_write(super().description_path(model_id), write)
+    def put_description(self, model_id: int, write: Callable[[Path], None], part: int = 0) -> Path:
+        path = atomic_write(super().description_path(model_id, part), write)
         with self.db.queue() as conn:
-            store(conn, description_key(model_id), path.read_bytes(), replace=True)
+            store(conn, description_key(model_id, part), path.read_bytes(), replace=True)
         return path
 
     def hide_mesh(self, sha256: str, file_type: str, conn: Any = None) -> Path | None:
@@ -117,14 +121,19 @@ class DatabaseBlobStore(BlobStore):
         self, model_id: int, sha256: str | None = None, file_type: str = "", conn: Any = None
     ) -> None:
         keys = [description_key(model_id)] + ([mesh_key(sha256, file_type)] if sha256 is not None else [])
+        prefix = object_descriptions_prefix(model_id)
         if conn is None:
             with self.db.queue() as own:
                 self._delete(own, keys)
+                own.execute("DELETE FROM blobs WHERE substr(key, 1, ?) = ?", (len(prefix), prefix))
         else:  # inside the caller's write: a second transaction would wait on it (SQLite's one writer)
             self._delete(conn, keys)
+            conn.execute("DELETE FROM blobs WHERE substr(key, 1, ?) = ?", (len(prefix), prefix))
         if sha256 is not None:
             super().mesh_path(sha256, file_type).unlink(missing_ok=True)
         super().description_path(model_id).unlink(missing_ok=True)
+        for path in super().object_description_paths(model_id):
+            path.unlink(missing_ok=True)
         self.delete_views(model_id)
 
     def _prefix(self, directory: Path) -> str:

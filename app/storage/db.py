@@ -127,6 +127,26 @@ MIGRATIONS: list[str] = [
     );
     CREATE INDEX variant_decisions_pair ON variant_decisions(low_id, high_id, seq);
     """,
+    # 6: object rows (storage/objects.py): the distinct objects of a multi-object file, each described
+    # and indexed as a row of the file too, with its BoF per vocabulary version
+    """
+    CREATE TABLE model_objects (
+        model_id INTEGER NOT NULL REFERENCES models(id) ON DELETE CASCADE,
+        part INTEGER NOT NULL,
+        copies INTEGER NOT NULL,
+        share REAL NOT NULL,
+        PRIMARY KEY (model_id, part)
+    );
+    CREATE TABLE object_bof (
+        seq INTEGER PRIMARY KEY AUTOINCREMENT,
+        model_id INTEGER NOT NULL REFERENCES models(id) ON DELETE CASCADE,
+        part INTEGER NOT NULL,
+        vocabulary_id INTEGER NOT NULL REFERENCES vocabularies(id) ON DELETE CASCADE,
+        vector BLOB NOT NULL,
+        UNIQUE (model_id, part, vocabulary_id)
+    );
+    CREATE INDEX object_bof_vocabulary_seq ON object_bof(vocabulary_id, seq);
+    """,
 ]
 
 

@@ -56,6 +56,12 @@ class BruteLive:
         order = np.argsort(d, kind="stable")[:k]
         return d[order], ids[order], vocabulary_id
 
+    def search_objects(self, vector, k, allowed, vocabulary_id):  # no multi-object file here
+        return np.zeros(0, np.float32), np.zeros(0, np.int64), np.zeros(0, np.int64)
+
+    def object_vector(self, model_id, part):
+        return None
+
 
 @pytest.fixture
 def deleted() -> set[int]:

@@ -264,7 +264,7 @@ def test_an_ingest_describes_encodes_and_marks_the_model_ready(ctx, fakes):
     vid = _vocabulary(ctx)
     model_id, job = _submitted_job(ctx)
     timings = ingestion.run_ingest(ctx, job)
-    assert set(timings) == {"load", "describe.spectrum", "describe.hks", "variants", "encode"}
+    assert set(timings) == {"load", "describe.spectrum", "describe.hks", "objects", "variants", "encode"}
     assert (timings["describe.spectrum"], timings["describe.hks"]) == (0.25, 0.5)
     assert all(0 <= v < 60 for v in timings.values())  # durations, not clock readings
     assert fakes.describe == [(4, ctx.settings.describe.params())]
@@ -276,7 +276,8 @@ def test_an_ingest_describes_encodes_and_marks_the_model_ready(ctx, fakes):
         assert vocab_repo.vector_of(conn, model_id, vid).tolist() == [vid] * 3
     done = _job(ctx, job.id)
     # the job's result names the likely variants (none: the model is alone)
-    assert (done.state, done.error, done.timings) == ("done", None, {**timings, "result": {"variants": []}})
+    result = {"variants": [], "object_rows": 0}  # nor has it objects of its own (app.core.object_rows)
+    assert (done.state, done.error, done.timings) == ("done", None, {**timings, "result": result})
 
 
 def test_without_a_vocabulary_the_model_is_ready_without_a_vector(ctx, fakes):
@@ -330,7 +331,7 @@ def test_a_model_deleted_during_the_job_leaves_no_description(settings, monkeypa
     assert not ctx.blobs.description_path(model_id).exists()
     done = _job(ctx, job.id)
     assert (done.state, done.timings) == ("done", dict(timings, note="model deleted during ingestion"))
-    assert set(timings) == {"load", "describe.spectrum", "describe.hks", "variants", "encode"}
+    assert set(timings) == {"load", "describe.spectrum", "describe.hks", "objects", "variants", "encode"}
     with ctx.db.read() as conn:
         assert vocab_repo.vector_of(conn, model_id, vid) is None
 

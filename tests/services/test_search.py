@@ -25,6 +25,7 @@ class FakeLive:
         self.swaps = swaps
         self.calls: list[tuple[int, object, int]] = []  # (k, allowed, vocabulary_id) per search
         self.vectors: list[np.ndarray] = []
+        self.objects: list[tuple[float, int, int]] = []  # object rows: (distance, model id, part)
         # pure-BoF vectors: the index's order is served as it is (fusion_rerank.applies)
         self.pair: SimpleNamespace | None = SimpleNamespace(
             record=SimpleNamespace(id=VOCAB_ID), params=SimpleNamespace(fusion=False))
@@ -42,6 +43,12 @@ class FakeLive:
         ids = self.ids if allowed is None else self.ids[np.isin(self.ids, allowed)]
         ids = ids[:k]
         return np.arange(len(ids), dtype=np.float32) / 2, ids, vocabulary_id
+
+    def search_objects(self, vector, k, allowed, vocabulary_id):
+        """The object rows in `self.objects` ((distance, model id, part) each), nearest first."""
+        rows = sorted(r for r in self.objects if allowed is None or r[1] in allowed)[:k]
+        return (np.array([r[0] for r in rows], np.float32), np.array([r[1] for r in rows], np.int64),
+                np.array([r[2] for r in rows], np.int64))
 
 
 @pytest.fixture
@@ -79,6 +86,17 @@ def test_similar_leaves_the_model_out_and_ranks_from_one(ctx):
     assert live.calls == [(3, None, VOCAB_ID)]  # k + 1: room for the model itself
     assert live.vectors[0].tolist() == [3.0] * 4  # the stored model's own vector
     assert set(result.seconds) == {"search"} and result.seconds["search"] >= 0
+
+
+def test_an_object_row_nearer_than_its_files_whole_brings_the_file_up_and_says_which_object(ctx):
+    live = FakeLive([3, 1, 2, 4, 5])  # wholes at 0, 0.5, 1.0, 1.5, 2.0 (3 is the query itself)
+    live.objects = [(0.25, 4, 2), (0.75, 4, 1), (0.125, 3, 1), (3.0, 5, 1)]  # 3's own object: still left out
+    result = search.similar(ctx, live, 3, k=3)  # type: ignore[arg-type]
+    assert [(h.model.id, h.part, h.distance) for h in result.hits] == [(4, 2, 0.25), (1, 0, 0.5), (2, 0, 1.0)]
+    live = FakeLive([3, 1, 2, 4, 5])
+    live.objects = [(0.25, 4, 2)]
+    result = search.similar(ctx, live, 3, k=3, label="a")  # type: ignore[arg-type]
+    assert [(h.model.id, h.part) for h in result.hits] == [(1, 0), (2, 0)]  # 4 is b: its rows are not allowed
 
 
 def test_similar_refuses_unknown_and_unindexed_models(ctx):

@@ -25,7 +25,7 @@ def _model(db) -> int:
 def test_schema_version_and_wal_mode(db):
     with db.read() as conn:
         versions = conn.execute("SELECT version FROM schema_migrations ORDER BY version").fetchall()
-        assert [r[0] for r in versions] == [1, 2, 3, 4, 5]
+        assert [r[0] for r in versions] == [1, 2, 3, 4, 5, 6]
         if db.dialect == "sqlite":
             assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
     assert db.ping()

@@ -203,6 +203,7 @@ def to_response(
             model_id=h.model.id, name=h.model.name, label=h.model.label, distance=h.distance, rank=h.rank,
             rerank_distance=h.rerank, forward=h.forward, reverse=h.reverse, partial=h.partial,
             region=_region(h.region), relation=relations.get(h.model.id), evidence=evidence.get(h.model.id),
+            matched_object=h.part or None,
         )
         for h in result.hits
     ]

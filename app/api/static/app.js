@@ -109,6 +109,7 @@ function renderResults(container, query, response) {
       el("div", { class: "rank" }, `#${hit.rank}`),
       same ? el("div", { class: "mark same-label", title: `same label as the query (${query.label})` }, "✓ same label") : null,
       hit.relation ? el("div", { class: "mark variant", title: "a verified variant of the query (Variants above)" }, hit.relation) : null,
+      hit.matched_object ? el("div", { class: "mark variant", title: "a file of several objects: the query matched one of them (1 = the largest)" }, `object ${hit.matched_object} of the file`) : null,
       thumb(thumbUrl(hit.model_id), hit.name),
       el("div", { class: "meta" },
         el("div", { class: "name", title: hit.name }, hit.name),
