@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from app.core import hks as hks_mod
+from app.core.doubling import DOUBLE_RIM, doubled
 from app.core.holes import fill_holes
 from app.core.keypoints import KeypointFilter, detect
 from app.core.laplacian import LAPLACIANS, laplacian
@@ -25,7 +26,7 @@ from app.core.remeshing import isotropic_remesh
 from app.core.resolution import SUBDIVISIONS, normalize_scale, to_resolution
 from app.core.roughness import displacement_correlation, smooth_until
 from app.core.smoothing import WEIGHTS, taubin
-from app.core.spectrum import SpectrumError, smallest_eigenpairs
+from app.core.spectrum import Spectrum, SpectrumError, smallest_eigenpairs
 
 DESCRIPTION_FORMAT = 3  # 3: + the local signature (app/core/partial.py); 2 (HKS packed), 1 still load
 LOCAL = LocalParams()  # fixed: a model's and a query's local signatures must share one grid
@@ -286,7 +287,19 @@ def _from_canonical(mesh: Mesh, input_noise: float, fine: Mesh, rim: np.ndarray,
         smoothed = isotropic_remesh(smoothed, params.target_vertices)
     work = normalize_scale(smoothed)
     clock.lap("resample")
-    stiffness, mass = laplacian(work.vertices, work.faces, params.laplacian)
+    n = work.n_vertices
+    # remeshing moves the vertices off the canonical mesh's: its rim is the remeshed mesh's open boundary
+    rim_now = rim if len(rim) == n else _rim_mask(work.faces, n, n)
+    # the rim's length as resampled, before smoothing: smoothing pulls a puncture's vertices (a face
+    # that decimation collapsed to a point, ~1e-8 across, left open by fill_holes) an edge apart, and a
+    # few such read as a piece's rim (docs/partial.md, "Punctures are not rims")
+    measured = rim_length(fine.vertices, fine.faces, rim) if rim_now is rim else None
+    rim_value = measured if measured is not None else rim_length(work.vertices, work.faces, rim_now)
+    # a surface that is rim nearly everywhere (what one viewer sees: the front of every limb) is solved
+    # on its double, at unit area: each half-tube's heat is then its tube's (app.core.doubling), and no
+    # slope needs the rim's distrust
+    solve = Mesh(*doubled(work.vertices / np.sqrt(2.0), work.faces)) if rim_value > DOUBLE_RIM else work
+    stiffness, mass = laplacian(solve.vertices, solve.faces, params.laplacian)
     clock.lap("laplacian")
     try:
         spectrum = smallest_eigenpairs(stiffness, mass, params.k, method=params.solver)
@@ -294,20 +307,17 @@ def _from_canonical(mesh: Mesh, input_noise: float, fine: Mesh, rim: np.ndarray,
         times = hks_mod.time_scales(spectrum.eigenvalues, params.m, params.time_range)
     except SpectrumError as exc:  # the mesh's, not the server's: a clear refusal (422), never retried
         raise InvalidMeshError(f"the mesh's Laplace-Beltrami spectrum could not be computed: {exc}") from exc
-    raw = hks_mod.heat_kernel_signature(spectrum, times)
+    own = spectrum if solve is work else Spectrum(spectrum.eigenvalues, spectrum.eigenvectors[:n])
+    raw = hks_mod.heat_kernel_signature(own, times)  # (n, m): the surface's own vertices
     h = hks_mod.normalize(raw)
     clock.lap("hks")
     masks = [detect(raw, work.faces, flt) for flt in filters]
     clock.lap("keypoints")
-    hks32, weights = h.astype(np.float32), mass.diagonal().astype(np.float32)
-    # remeshing moves the vertices off the canonical mesh's: its rim is the remeshed mesh's open boundary
-    rim_now = rim if len(rim) == work.n_vertices else _rim_mask(work.faces, work.n_vertices, work.n_vertices)
-    # the rim's length as resampled, before smoothing: smoothing pulls a puncture's vertices (a face
-    # that decimation collapsed to a point, ~1e-8 across, left open by fill_holes) an edge apart, and a
-    # few such read as a piece's rim (docs/partial.md, "Punctures are not rims")
-    measured = rim_length(fine.vertices, fine.faces, rim) if rim_now is rim else None
-    local = local_signature(spectrum, work.vertices, work.faces, mass.diagonal(), rim_now, LOCAL,
-                            measured_rim=measured)
+    areas = mass.diagonal()[:n]
+    hks32, weights = h.astype(np.float32), areas.astype(np.float32)
+    trusted = rim_now if solve is work else np.zeros(n, dtype=bool)
+    local = local_signature(own, solve.vertices[:n], work.faces, areas, trusted, LOCAL,
+                            measured_rim=rim_value)
     clock.lap("local")
     return [
         ShapeDescription(hks=hks32, weights=weights, keypoints=mask, eigenvalues=spectrum.eigenvalues,
