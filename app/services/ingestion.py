@@ -23,6 +23,7 @@ from app.storage.jobs import JobRecord
 from app.storage.models import ModelRecord
 
 log = logging.getLogger(__name__)
+OBJECTS_SHARE = 0.25  # of ingest_timeout_s that a file's object rows may take before the rest are left out
 
 
 @dataclass(frozen=True)
@@ -121,7 +122,9 @@ def run_ingest(ctx: ServiceContext, job: JobRecord) -> dict:
     description, fine = describe_and_view(mesh, params)
     timings.update({f"describe.{k}": v for k, v in description.seconds.items()})
     t = time.perf_counter()
-    parts = object_rows.describe_objects(mesh, params, ctx.settings.object_rows)  # a plate's objects
+    # a plate's objects, within a quarter of the job's wall clock (they never fail the ingest)
+    parts = object_rows.describe_objects(mesh, params, ctx.settings.object_rows,
+                                         budget_s=OBJECTS_SHARE * ctx.settings.ingest_timeout_s)
     object_rows.save_descriptions(ctx, model.id, parts)
     timings["objects"] = time.perf_counter() - t
     found, timings["variants"] = variants.timed_detect(ctx, model.id, mesh)  # advisory: never fails a job

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import logging
 import sqlite3
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,14 +28,20 @@ class DescribedObject:
     description: ShapeDescription
 
 
-def describe_objects(mesh: Mesh, params: DescribeParams, max_rows: int) -> list[DescribedObject]:
+def describe_objects(mesh: Mesh, params: DescribeParams, max_rows: int,
+                     budget_s: float = float("inf")) -> list[DescribedObject]:
     """The distinct objects of `mesh` (none for a single-object mesh, or max_rows 0), each described
-    as a mesh of its own. An object that cannot be described (too small a spectrum) is left out: the
-    file keeps its whole row and its other objects'."""
+    as a mesh of its own, largest first. An object that cannot be described (too small a spectrum) is
+    left out: the file keeps its whole row and its other objects'. No object is started past
+    `budget_s` seconds (the ingest's share for them: object rows never cost a file its ingest)."""
     if max_rows <= 0:
         return []
+    start = time.monotonic()
     found = []
     for row in distinct_objects(mesh, max_rows):
+        if time.monotonic() - start > budget_s:
+            log.warning("object rows cut at %d: their describes took over %.0f s", row.part - 1, budget_s)
+            break
         try:
             found.append(DescribedObject(row, describe(row.mesh, params)))
         except (InvalidMeshError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
