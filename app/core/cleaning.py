@@ -81,6 +81,8 @@ def clean(mesh: Mesh, min_component_area_fraction: float = DEBRIS_FRACTION) -> M
     no surface for the Laplace-Beltrami operator to act on and is refused with a message saying so.
     Vertices keep their input order (first occurrence of a welded group).
     """
+    if len(mesh.faces) == 0 or len(mesh.vertices) == 0:  # e.g. a resampling that kept nothing
+        raise InvalidMeshError("the mesh has no faces left to describe")
     vertices, faces = merge_vertices(mesh.vertices, mesh.faces)
     areas = _face_areas(vertices, faces)
     side = float(np.ptp(vertices, axis=0).max())

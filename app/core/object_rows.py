@@ -20,7 +20,9 @@ from app.core.variants.surface import objects
 MAX_ROWS = 8  # distinct objects a file gets rows for, the largest first
 MIN_AREA_SHARE = 0.02  # of the largest object's area: smaller ones are trim, not parts (as the variants)
 COPY_RADIUS = 0.05  # fingerprint L2 distance under which two objects are copies (variants.collection.SURE)
-MIN_FACES = 20  # an object with fewer faces has no spectrum worth indexing
+MIN_FACES = 4  # fewer faces is trim (a flat quad is 2), as clean() refuses a mesh of fewer
+SPLIT_CAP = 128  # objects split off before copies are merged (the largest): a plate's many copies of one
+# part must not crowd its other parts out
 
 
 @dataclass(frozen=True)
@@ -44,7 +46,7 @@ def distinct_objects(mesh: Mesh, max_rows: int = MAX_ROWS) -> list[ObjectRow]:
 
     Copies are told apart by the variants' fingerprint (scale- and motion-free, so a part and its
     rescaled copy share a row: the BoF is scale-free too)."""
-    found = [o for o in objects(mesh, MIN_AREA_SHARE) if o.n_faces >= MIN_FACES]
+    found = objects(mesh, MIN_AREA_SHARE, max_objects=SPLIT_CAP, min_faces=MIN_FACES)
     if len(found) < 2:
         return []
     total = float(mesh.face_areas().sum())

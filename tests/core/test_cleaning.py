@@ -487,3 +487,10 @@ def test_vertex_components_label_a_last_vertex_in_no_face():
     v = np.vstack([TETRA, [[9.0, 9.0, 9.0]]])
     labels = cleaning.vertex_components(Mesh(v, TETRA_FACES))
     assert labels.shape == (5,) and len(set(labels[:4].tolist())) == 1 and labels[4] != labels[0]
+
+
+def test_an_empty_mesh_is_a_clear_refusal():
+    """What a resampling that kept nothing hands on: an InvalidMeshError (422, never retried), not a
+    numpy reduction error."""
+    with pytest.raises(InvalidMeshError, match="no faces left"):
+        clean(Mesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64)))

@@ -89,3 +89,17 @@ def test_a_view_of_a_body_is_described_on_its_double_and_reads_closer_to_its_who
 
     gap = lambda d: float(np.abs(np.log(dna(d) / dna(reference))).mean())  # noqa: E731
     assert gap(seen) < 0.5 * gap(plain)
+
+
+def test_a_strip_that_is_all_rim_reads_its_rim_and_is_doubled():
+    """Every vertex of a two-row strip is on its free boundary: none is a cap's centre (a cap's centre
+    has only loop vertices around it), so the rim reads the strip's perimeter over √area."""
+    from app.core.partial import rim_length
+
+    n = 40
+    vertices = np.array([[x, y, 0.0] for x in range(n) for y in (0.0, 1.0)])
+    faces = np.array([[2 * i, 2 * i + 2, 2 * i + 3] for i in range(n - 1)]
+                     + [[2 * i, 2 * i + 3, 2 * i + 1] for i in range(n - 1)])
+    rim = free_boundary(faces, len(vertices))
+    assert rim.all()
+    assert np.isclose(rim_length(vertices, faces, rim), (2 * (n - 1) + 2) / np.sqrt(n - 1))

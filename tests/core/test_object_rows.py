@@ -56,3 +56,20 @@ def test_rows_merge_into_one_entry_a_model_at_its_least_distance():
     none = np.zeros(0, np.int64)
     empty = merge_rows(np.array([1.0]), np.array([3]), np.zeros(0), none, none)
     assert empty[1].tolist() == [3] and empty[2].tolist() == [0]
+
+
+def test_flat_trim_never_crowds_the_parts_out():
+    """70 large two-face quads (trim: fewer faces than a surface needs) beside a torus and a cube: the
+    quads are neither rows nor the yardstick of the area share, and the cube (12 faces) is a part."""
+    quad = trimesh.Trimesh([[0, 0, 0], [3, 0, 0], [3, 3, 0], [0, 3, 0]], [[0, 1, 2], [0, 2, 3]])
+    torus = trimesh.creation.torus(1.0, 0.3)
+    parts = [_at(quad, 4 * i) for i in range(70)] + [_at(torus, 300), _at(trimesh.creation.box(), 310)]
+    rows = distinct_objects(_mesh(*parts))
+    assert [r.mesh.n_faces for r in rows] == [torus.faces.shape[0], 12]
+
+
+def test_many_copies_do_not_crowd_out_a_smaller_distinct_part():
+    box = trimesh.creation.box((1.0, 0.6, 0.3)).subdivide()
+    ball = trimesh.creation.icosphere(2, radius=0.3)  # smaller than every copy of the box
+    rows = distinct_objects(_mesh(*(_at(box, 2 * i) for i in range(100)), _at(ball, 250)))
+    assert [(r.copies, r.mesh.n_faces) for r in rows] == [(100, box.faces.shape[0]), (1, ball.faces.shape[0])]

@@ -92,12 +92,14 @@ def sample_surface(
     return points, normals, face
 
 
-def objects(mesh: Mesh, min_area_fraction: float = 0.02, max_objects: int = 64) -> list[Mesh]:
+def objects(mesh: Mesh, min_area_fraction: float = 0.02, max_objects: int = 64,
+            min_faces: int = 0) -> list[Mesh]:
     """Split a mesh into its objects: connected components whose bounding boxes overlap are one object
     (a model's loose pieces, e.g. eyes in a head, stay together; the copies on a print plate part).
 
-    Objects smaller than `min_area_fraction` of the largest are left out; at most `max_objects`, largest
-    first. A single-object mesh gives [mesh] itself.
+    Objects of fewer than `min_faces` faces are left out first (so that large flat trim cannot crowd the
+    real parts out of the cap), then those smaller than `min_area_fraction` of the largest left; at most
+    `max_objects`, largest first. A single-object mesh gives [mesh] itself.
     """
     labels = face_components(mesh.faces, mesh.n_vertices)  # (f,)
     n = int(labels.max()) + 1
@@ -117,7 +119,11 @@ def objects(mesh: Mesh, min_area_fraction: float = 0.02, max_objects: int = 64) 
     if group.max() == 0:
         return [mesh]
     areas = np.bincount(object_of_face, weights=mesh.face_areas())
-    keep = [int(g) for g in np.argsort(-areas) if areas[g] >= min_area_fraction * areas.max()][:max_objects]
+    areas[np.bincount(object_of_face) < min_faces] = 0.0  # trim: never an object, nor the yardstick
+    if not areas.any():
+        return []
+    keep = [int(g) for g in np.argsort(-areas)
+            if areas[g] > 0 and areas[g] >= min_area_fraction * areas.max()][:max_objects]
     return [submesh(mesh, object_of_face == g) for g in keep]
 
 
