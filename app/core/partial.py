@@ -131,15 +131,12 @@ def rim_length(vertices: np.ndarray, faces: np.ndarray, rim: np.ndarray) -> floa
     if not rim.any():
         return 0.0
     edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    # a rim vertex with a neighbour off the rim is on a loop; one with none, all of whose neighbours are
-    # on loops, is a cap's centre (a surface that is all rim, a strip, has loops and no caps)
+    # a rim vertex with a neighbour off the rim is on a loop; one with none is a cap's centre, unless no
+    # rim vertex has such a neighbour: a surface that is all rim (a strip) has loops and no caps
     off = np.zeros(len(vertices), dtype=bool)
-    beside_inner = np.zeros(len(vertices), dtype=bool)  # a neighbour that is neither off nor on a loop
     for a, b in ((0, 1), (1, 0)):
         off[edges[~rim[edges[:, b]], a]] = True
-    for a, b in ((0, 1), (1, 0)):
-        beside_inner[edges[rim[edges[:, b]] & ~off[edges[:, b]], a]] = True
-    centre = rim & ~off & ~beside_inner
+    centre = rim & ~off if off[rim].any() else np.zeros(len(vertices), dtype=bool)
     surface = faces[~centre[faces].any(axis=1)]
     # the surface's free edges, open or capped
     once = surface[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)[edge_uses(surface)[1] == 1]
