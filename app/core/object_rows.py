@@ -81,11 +81,6 @@ def merge_rows(
     ids = np.concatenate([np.asarray(whole_ids, np.int64), np.asarray(object_models, np.int64)])
     parts = np.concatenate([np.zeros(len(whole_ids), np.int64), np.asarray(object_parts, np.int64)])
     order = np.lexsort((parts, ids, dist))  # by distance, then id, then part
-    seen: set[int] = set()
-    keep = []
-    for j in order:
-        if int(ids[j]) not in seen:
-            seen.add(int(ids[j]))
-            keep.append(j)
-    sel = np.asarray(keep, np.int64)
+    _, first = np.unique(ids[order], return_index=True)  # each model's first (nearest) entry
+    sel = order[np.sort(first)]
     return dist[sel].astype(np.float32), ids[sel], parts[sel]

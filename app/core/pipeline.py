@@ -293,8 +293,8 @@ def _from_canonical(mesh: Mesh, input_noise: float, fine: Mesh, rim: np.ndarray,
     # the rim's length as resampled, before smoothing: smoothing pulls a puncture's vertices (a face
     # that decimation collapsed to a point, ~1e-8 across, left open by fill_holes) an edge apart, and a
     # few such read as a piece's rim (docs/partial.md, "Punctures are not rims")
-    measured = rim_length(fine.vertices, fine.faces, rim) if rim_now is rim else None
-    rim_value = measured if measured is not None else rim_length(work.vertices, work.faces, rim_now)
+    rim_value = (rim_length(fine.vertices, fine.faces, rim) if rim_now is rim
+                 else rim_length(work.vertices, work.faces, rim_now))
     # a surface that is rim nearly everywhere (what one viewer sees: the front of every limb) is solved
     # on its double, at unit area: each half-tube's heat is then its tube's (app.core.doubling), and no
     # slope needs the rim's distrust

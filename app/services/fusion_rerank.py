@@ -67,8 +67,9 @@ def search(
             found = vocab_repo.vectors_of(conn, vocabulary_id, [int(i) for i in ids if int(i) not in seen])
         seen.update(found)
         for i in ids:  # a candidate through an object row is compared as that object
-            row = live.object_vector(int(i), parts.get(int(i), 0)) if parts.get(int(i), 0) else None
-            if row is not None and int(i) in seen:
+            part = parts.get(int(i), 0)
+            row = live.object_vector(int(i), part) if part and int(i) in seen else None
+            if row is not None:
                 seen[int(i)] = row
         found = {int(i): seen[int(i)] for i in ids if int(i) in seen}
         kept = np.array([i for i in ids if int(i) in found], np.int64)  # deleted a moment ago: dropped

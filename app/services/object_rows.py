@@ -87,14 +87,3 @@ def store_vectors(conn: sqlite3.Connection, vocabulary_id: int,
         if model_id in alive:
             objects_repo.put_vector(conn, model_id, part, vocabulary_id, vec)
 
-
-def encode_missing(ctx: ServiceContext, vocabulary_id: int, vocab: Vocabulary, params: EncodeParams) -> int:
-    """Encode the ready models' object rows that have no vector under this version; returns how many."""
-    with ctx.db.read() as conn:
-        missing = objects_repo.parts_without_vector(conn, vocabulary_id)
-    if not missing:
-        return 0
-    rows = encode_parts(ctx, vocab, params, missing)
-    with ctx.db.write() as conn:
-        store_vectors(conn, vocabulary_id, rows)
-    return len(rows)

@@ -230,9 +230,7 @@ def rebuild_vocabulary(
     index.save(ctx.index_path(vid))
     timings["encode_and_index"] = time.perf_counter() - t
     keep_alive()
-    with ctx.db.read() as conn:
-        parts = objects_repo.ready_parts(conn, ids)
-    part_rows = object_rows.encode_parts(ctx, vocab, params, parts)  # a plate's objects, as its whole
+    part_rows = object_rows.encode_parts(ctx, vocab, params, _parts_of(ctx, ids))  # a plate's objects
     keep_alive()
     with ctx.db.write() as conn:  # the swap: vectors + active flag in ONE transaction
         alive = set(models_repo.get_many(conn, ids))
@@ -333,12 +331,19 @@ def encode_version_parts(
     ctx: ServiceContext, record: VocabularyRecord, model_ids: list[int]
 ) -> list[tuple[int, int, np.ndarray]]:
     """The object rows of `model_ids` encoded with version `record`: (model id, part, vector) each."""
-    with ctx.db.read() as conn:
-        parts = objects_repo.ready_parts(conn, model_ids)
+    parts = _parts_of(ctx, model_ids)
     if not parts:
         return []
     vocab = load_vocabulary(ctx, record)
     return object_rows.encode_parts(ctx, vocab, version_params(ctx, record, vocab), parts)
+
+
+def _parts_of(ctx: ServiceContext, model_ids: list[int]) -> list[tuple[int, int]]:
+    """(model id, part) of the ready object rows of `model_ids` (one scan of the few object rows, not an
+    IN over every model id)."""
+    wanted = set(model_ids)
+    with ctx.db.read() as conn:
+        return [(m, p) for m, p in objects_repo.ready_parts(conn) if m in wanted]
 
 
 def store_vectors(conn: sqlite3.Connection, vocabulary_id: int, ids: list[int], vectors: np.ndarray) -> None:

@@ -40,17 +40,12 @@ def objects_of(conn: sqlite3.Connection, model_id: int) -> list[tuple[int, int, 
     return [(int(r[0]), int(r[1]), float(r[2])) for r in rows]
 
 
-def ready_parts(conn: sqlite3.Connection, model_ids: list[int] | None = None) -> list[tuple[int, int]]:
-    """(model id, part) of the object rows of ready models (of `model_ids`, or all), in order."""
-    sql = ("SELECT o.model_id, o.part FROM model_objects o JOIN models m ON m.id = o.model_id"
-           " WHERE m.status = 'ready'")
-    args: list[int] = []
-    if model_ids is not None:
-        if not model_ids:
-            return []
-        sql += f" AND o.model_id IN ({','.join('?' * len(model_ids))})"
-        args = [int(i) for i in model_ids]
-    rows = conn.execute(sql + " ORDER BY o.model_id, o.part", args)
+def ready_parts(conn: sqlite3.Connection) -> list[tuple[int, int]]:
+    """(model id, part) of the object rows of ready models, in order."""
+    rows = conn.execute(
+        "SELECT o.model_id, o.part FROM model_objects o JOIN models m ON m.id = o.model_id"
+        " WHERE m.status = 'ready' ORDER BY o.model_id, o.part"
+    )
     return [(int(r[0]), int(r[1])) for r in rows]
 
 
