@@ -219,23 +219,27 @@ def stored_vectors(ctx: ServiceContext, vocabulary_id: int, model_ids: Sequence[
     return out
 
 
-def with_peers(ctx: ServiceContext, vocabulary_id: int, model_ids: Sequence[int],
-               found: list[PartialMatch | None], work: Work | None = None) -> list[PartialMatch | None]:
-    """The scored candidates' scores averaged with their nearest fellow candidates'
-    (app.core.piece_rank.with_peers), the stored vectors of those scored (at most RERANK) read in one
-    query: bounded work after the scoring's deadline. work: gets its seconds."""
+def ordered(ctx: ServiceContext, vocabulary_id: int | None, model_ids: Sequence[int],
+            found: list[PartialMatch | None], work: Work | None = None
+            ) -> tuple[list[int], list[PartialMatch | None]]:
+    """(indices of model_ids in served order, the matches with their peers set): the scored
+    candidates' scores averaged with their nearest fellow candidates' (app.core.piece_rank.with_peers),
+    then ordered by score anchored on the first hit (piece_rank.by_score), from the stored vectors of
+    those scored (at most RERANK) read in one query under `vocabulary_id` (None: no vectors, each its
+    own score and no anchor): bounded work after the scoring's deadline. work: gets its seconds."""
     t = time.perf_counter()
     scored = [j for j, m in enumerate(found) if m is not None]
-    out = list(found)
-    if len(scored) >= 2:
+    out, vectors = list(found), None
+    if vocabulary_id is not None and len(scored) >= 2:
         read = stored_vectors(ctx, vocabulary_id, [model_ids[j] for j in scored])
         if read.shape[1]:
             vectors = np.full((len(found), read.shape[1]), np.nan)
             vectors[scored] = read
             out = piece_rank.with_peers(found, vectors)
+    order = piece_rank.by_score(out, vectors)
     if work is not None:
         work.seconds["peers"] = time.perf_counter() - t
-    return out
+    return order, out
 
 
 def regions(ctx: ServiceContext, query: LocalSignature | None, model_ids: Sequence[int],

@@ -7,7 +7,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from app.core import piece_rank
 from app.core.object_rows import merge_rows
 from app.core.partial import LocalSignature
 from app.core.partial_match import Region
@@ -141,9 +140,7 @@ def _scored(ctx: ServiceContext, local: LocalSignature | None, hits: list[Hit], 
         hits = hits[:k]
     found = partial_mod.score(ctx, local, [h.model.id for h in hits], work)
     if piece:
-        if vocabulary_id is not None:
-            found = partial_mod.with_peers(ctx, vocabulary_id, [h.model.id for h in hits], found, work)
-        order = piece_rank.by_score(found)
+        order, found = partial_mod.ordered(ctx, vocabulary_id, [h.model.id for h in hits], found, work)
         hits, found = [hits[j] for j in order[:k]], [found[j] for j in order[:k]]
     where: list[Region | None] = [None] * len(hits)
     if piece:

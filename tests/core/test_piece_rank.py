@@ -10,7 +10,7 @@ import pytest
 from app.config import DescribeSettings
 from app.core import piece_rank
 from app.core.mesh import Mesh
-from app.core.partial_match import COPY_DISTANCE, PEER_RADIUS, PEER_WEIGHT, PartialMatch
+from app.core.partial_match import CAP, COPY_DISTANCE, PEER_RADIUS, PEER_WEIGHT, PartialMatch
 from app.core.pipeline import LOCAL, describe
 from app.services import partial as partial_service
 from app.services import search as search_service
@@ -141,3 +141,37 @@ def test_an_unscored_candidate_or_one_without_a_vector_is_nobodys_peer():
     assert np.isnan(lone[0].peers) and lone[0].score == 1.0  # no fellow candidate: its own score
     with pytest.raises(ValueError):
         piece_rank.with_peers(found, vectors[:2])
+
+
+def test_the_first_hit_anchors_the_order_of_the_others():
+    """By hand, scores 1-4 CAPs, model 0 first. On a line, models 1, 2, 3 are 3, 5 and 1 from it (median
+    3): each other one's key is its score plus anchor x CAP x distance / 3. At weight 1: model 1 3.0,
+    model 2 4.67, model 3 4.33 CAPs; at weight 6: 8, 13, 6. Without vectors, or at weight 0: by score."""
+    found = [_own(s * CAP) for s in (1.0, 2.0, 3.0, 4.0)]
+    line = np.array([[0.0], [3.0], [5.0], [1.0]])
+    assert piece_rank.by_score(found) == [0, 1, 2, 3]
+    assert piece_rank.by_score(found, line, anchor=0.0) == [0, 1, 2, 3]
+    assert piece_rank.by_score(found, line, anchor=1.0) == [0, 1, 3, 2]
+    assert piece_rank.by_score(found, line, anchor=6.0) == [0, 3, 1, 2]
+    assert piece_rank.by_score(found, line, anchor=1e6)[0] == 0  # the first hit stays first, at any weight
+    assert piece_rank.by_score(found, line) == piece_rank.by_score(found, line, anchor=piece_rank.ANCHOR)
+
+
+def test_a_stored_copy_of_the_query_stays_first_and_does_not_anchor():
+    """Model 0 is the query itself, stored: it stays first, and the anchor is model 1, the best of the
+    others. Anchored on the copy instead, model 3 (beside the copy) would come second; anchored on
+    model 1 (distances 10, 1, 9.5: median 9.5), at weight 3 the keys are 2.32 and 6.0 CAPs."""
+    found = [_own(0.0), _own(1.0 * CAP), _own(2.0 * CAP), _own(3.0 * CAP)]
+    line = np.array([[0.0], [10.0], [11.0], [0.5]])
+    assert found[0].distance <= COPY_DISTANCE < found[1].distance
+    assert piece_rank.by_score(found, line, anchor=3.0) == [0, 1, 2, 3]
+    assert piece_rank.by_score([_own(0.01 * CAP)] + found[1:], line, anchor=3.0) == [0, 3, 1, 2]  # no copy
+
+
+def test_an_anchor_term_reads_an_unknown_vector_as_the_median_and_the_unscored_stay_last():
+    vectors = np.array([[0.0], [2.0], [np.nan], [4.0]])
+    term = piece_rank._anchor_term(vectors, 0, 1.0)  # distances 2, ?, 4 from model 0: median 3
+    assert term == pytest.approx([0.0, CAP * 2 / 3, CAP, CAP * 4 / 3])
+    assert not piece_rank._anchor_term(np.array([[np.nan], [1.0], [2.0]]), 0, 1.0).any()  # no anchor vector
+    found = [_own(1.0 * CAP), None, _own(2.0 * CAP), _own(1.5 * CAP)]
+    assert piece_rank.by_score(found, vectors, anchor=1.0)[-1] == 1
