@@ -4,9 +4,9 @@ A query whose rim (app.core.partial.rim_length) is at least RIM_PARTIAL is taken
 candidates are the first GLOBAL_KEEP models of the global order and the COARSE_KEEP nearest by a coarse
 partial distance (the query's first COARSE_POINTS samples) among the first COARSE_SCAN; each candidate
 is scored (match_many, then the vote among the candidates scored, then each score averaged with its
-nearest fellow candidates': with_peers) and the candidates come first by score, anchored on the first
-hit (by_score: the others' whole-shape distance to it counts too), the models without a score after
-them in their global order. The service
+nearest fellow candidates': with_peers) and the candidates come first by score, past the first page
+anchored on the first hit (by_score: their whole-shape distance to it counts too), the models without
+a score after them in their global order. The service
 (app.services.partial) runs these steps with the signatures read lazily and a deadline on each pass;
 the evaluation (app.evaluation.adaptive) runs them whole, through `piece_order`.
 """
@@ -39,10 +39,11 @@ GLOBAL_KEEP = 100
 COARSE_KEEP = 100
 COARSE_POINTS = 32  # an eighth of the samples: an eighth of a full match's cost per model
 COARSE_SCAN = 2000  # models the coarse pass reads, nearest first: all of a collection of this size
-# the order is anchored on its first hit (by_score): the others' whole-shape distance to it, over the
-# median such distance, weighs this many CAPs (picked on SHREC'11's picking split: 0.1-1.0 within 0.3
-# mAP of each other, docs/partial.md)
+# past its first PAGE candidates the order is anchored on its first hit (by_score): the others'
+# whole-shape distance to it, over the median such distance, weighs this many CAPs (picked on SHREC'11's
+# picking split: 0.1-1.0 within 0.3 mAP of each other, docs/partial.md)
 ANCHOR = 0.25
+PAGE = 10  # the first page of a piece's hits is ordered by the scores alone
 
 
 def is_piece(query: LocalSignature | None, requested: bool | None = None) -> bool:
@@ -108,29 +109,31 @@ def with_peers(found: Sequence[PartialMatch | None], vectors: np.ndarray, count:
 
 
 def by_score(found: Sequence[PartialMatch | None], vectors: np.ndarray | None = None,
-             anchor: float | None = None) -> list[int]:
+             anchor: float | None = None, page: int | None = None) -> list[int]:
     """Indices of `found` (candidates in global order) by score, the unscored last in their order.
 
     vectors (n, d): the candidates' stored fused vectors (a row of NaN where unknown), given to anchor
-    the order on its first hit: the best-scored candidate that is not a stored copy of the query stays
-    first, and every other one is ordered by its score plus `anchor` (None: ANCHOR) x CAP x its L1
-    distance to that first hit over the median such distance (a candidate of unknown vector: the
-    median). Why: the first hit is what partial matching finds best, and whole shapes are compared
-    reliably by their global vectors (SHREC'11 whole queries: 99 mAP), so the source's class-mates,
-    near it, come before look-alikes of one part: +1.7 to +4.3 mAP on five of the six piece sets of
-    SHREC'11's picking split, the first hit unchanged (docs/partial.md)."""
+    the order beyond its first page on its first hit: the first `page` (None: PAGE) candidates stay
+    in score order, and every later one is ordered by its score plus `anchor` (None: ANCHOR) x CAP x
+    its L1 distance to the first hit (the best-scored candidate that is not a stored copy of the
+    query) over the median such distance (a candidate of unknown vector: the median). Why: whole
+    shapes are compared reliably by their global vectors (SHREC'11 whole queries: 99 mAP), so past the
+    first page the first hit's class-mates come before look-alikes of one part (held-out SHREC'11
+    pieces +0.8 to +2.0 mAP); the first page is left to the scores because, when the first hit is
+    wrong, anchoring it too would fill the page with the wrong class (the right class in the first 10
+    for 0.79 of the pieces instead of 0.85; docs/partial.md)."""
     rank = np.array([m.score if m is not None else np.inf for m in found], dtype=np.float64)
-    group = np.zeros(len(found), dtype=np.int64)  # one group: by score alone
-    if vectors is not None and len(found) > 2:
-        first = _anchor(found, rank)
-        if first is not None:
-            # stored copies of the query first (as by score), then the anchor, then the others
-            group[:] = [0 if m is not None and m.distance <= COPY_DISTANCE else 2 for m in found]
-            group[first] = 1
-            others = group == 2
-            rank[others] += _anchor_term(np.asarray(vectors, dtype=np.float64), first,
-                                         ANCHOR if anchor is None else anchor)[others]
-    return sorted(range(len(found)), key=lambda j: (group[j], rank[j], j))
+    order = sorted(range(len(found)), key=lambda j: (rank[j], j))
+    page = PAGE if page is None else page
+    if vectors is None or len(found) <= page:
+        return order
+    first = _anchor(found, rank)
+    if first is None:
+        return order
+    rest = order[page:]
+    anchored = rank + _anchor_term(np.asarray(vectors, dtype=np.float64), first,
+                                   ANCHOR if anchor is None else anchor)
+    return order[:page] + sorted(rest, key=lambda j: (anchored[j], j))
 
 
 def _anchor(found: Sequence[PartialMatch | None], rank: np.ndarray) -> int | None:

@@ -224,9 +224,10 @@ def ordered(ctx: ServiceContext, vocabulary_id: int | None, model_ids: Sequence[
             ) -> tuple[list[int], list[PartialMatch | None]]:
     """(indices of model_ids in served order, the matches with their peers set): the scored
     candidates' scores averaged with their nearest fellow candidates' (app.core.piece_rank.with_peers),
-    then ordered by score anchored on the first hit (piece_rank.by_score), from the stored vectors of
-    those scored (at most RERANK) read in one query under `vocabulary_id` (None: no vectors, each its
-    own score and no anchor): bounded work after the scoring's deadline. work: gets its seconds."""
+    then ordered by score, past the first page anchored on the first hit (piece_rank.by_score), from
+    the stored vectors of those scored (at most RERANK) read in one query under `vocabulary_id` (None:
+    no vectors, each its own score and no anchor): bounded work after the scoring's deadline. work:
+    gets its seconds."""
     t = time.perf_counter()
     scored = [j for j, m in enumerate(found) if m is not None]
     out, vectors = list(found), None

@@ -145,27 +145,43 @@ def test_an_unscored_candidate_or_one_without_a_vector_is_nobodys_peer():
 
 def test_the_first_hit_anchors_the_order_of_the_others():
     """By hand, scores 1-4 CAPs, model 0 first. On a line, models 1, 2, 3 are 3, 5 and 1 from it (median
-    3): each other one's key is its score plus anchor x CAP x distance / 3. At weight 1: model 1 3.0,
-    model 2 4.67, model 3 4.33 CAPs; at weight 6: 8, 13, 6. Without vectors, or at weight 0: by score."""
+    3): with a first page of 1, each other one's key is its score plus anchor x CAP x distance / 3. At
+    weight 1: model 1 3.0, model 2 4.67, model 3 4.33 CAPs; at weight 6: 8, 13, 6. Without vectors, or
+    at weight 0: by score. A page of 2 keeps models 0 and 1 first (by score), then 3 (6) before 2 (13);
+    the served page (10) is longer than these four: by score."""
     found = [_own(s * CAP) for s in (1.0, 2.0, 3.0, 4.0)]
     line = np.array([[0.0], [3.0], [5.0], [1.0]])
     assert piece_rank.by_score(found) == [0, 1, 2, 3]
-    assert piece_rank.by_score(found, line, anchor=0.0) == [0, 1, 2, 3]
-    assert piece_rank.by_score(found, line, anchor=1.0) == [0, 1, 3, 2]
-    assert piece_rank.by_score(found, line, anchor=6.0) == [0, 3, 1, 2]
-    assert piece_rank.by_score(found, line, anchor=1e6)[0] == 0  # the first hit stays first, at any weight
-    assert piece_rank.by_score(found, line) == piece_rank.by_score(found, line, anchor=piece_rank.ANCHOR)
+    assert piece_rank.by_score(found, line, anchor=0.0, page=1) == [0, 1, 2, 3]
+    assert piece_rank.by_score(found, line, anchor=1.0, page=1) == [0, 1, 3, 2]
+    assert piece_rank.by_score(found, line, anchor=6.0, page=1) == [0, 3, 1, 2]
+    assert piece_rank.by_score(found, line, anchor=6.0, page=2) == [0, 1, 3, 2]
+    assert piece_rank.by_score(found, line, anchor=1e6, page=1)[0] == 0  # the first hit stays, at any weight
+    assert len(found) <= piece_rank.PAGE and piece_rank.by_score(found, line, anchor=1e6) == [0, 1, 2, 3]
+    served = piece_rank.by_score(found, line, anchor=piece_rank.ANCHOR, page=1)
+    assert piece_rank.by_score(found, line, page=1) == served
+
+
+def test_the_first_page_stays_in_score_order_and_the_rest_follows_the_first_hit():
+    """Twelve candidates, scores 1-12 CAPs: the first PAGE (10) stay by score; of the last two, the one
+    beside the first hit (model 11) comes before the far one (model 10) at a strong enough weight."""
+    found = [_own((j + 1) * CAP) for j in range(12)]
+    line = np.array([[0.0]] + [[5.0]] * 10 + [[0.1]])
+    order = piece_rank.by_score(found, line, anchor=10.0)
+    assert piece_rank.PAGE == 10
+    assert order[:10] == list(range(10)) and order[10:] == [11, 10]
 
 
 def test_a_stored_copy_of_the_query_stays_first_and_does_not_anchor():
-    """Model 0 is the query itself, stored: it stays first, and the anchor is model 1, the best of the
-    others. Anchored on the copy instead, model 3 (beside the copy) would come second; anchored on
-    model 1 (distances 10, 1, 9.5: median 9.5), at weight 3 the keys are 2.32 and 6.0 CAPs."""
+    """Model 0 is the query itself, stored: it stays first (a page of 1), and the anchor is model 1,
+    the best of the others. Anchored on the copy instead, model 3 (beside the copy) would come second;
+    anchored on model 1 (distances 10, 1, 9.5: median 9.5), at weight 3 the keys are 2.32 and 6.0 CAPs."""
     found = [_own(0.0), _own(1.0 * CAP), _own(2.0 * CAP), _own(3.0 * CAP)]
     line = np.array([[0.0], [10.0], [11.0], [0.5]])
     assert found[0].distance <= COPY_DISTANCE < found[1].distance
-    assert piece_rank.by_score(found, line, anchor=3.0) == [0, 1, 2, 3]
-    assert piece_rank.by_score([_own(0.01 * CAP)] + found[1:], line, anchor=3.0) == [0, 3, 1, 2]  # no copy
+    assert piece_rank.by_score(found, line, anchor=3.0, page=1) == [0, 1, 2, 3]
+    no_copy = [_own(0.01 * CAP)] + found[1:]
+    assert piece_rank.by_score(no_copy, line, anchor=3.0, page=1) == [0, 3, 1, 2]
 
 
 def test_an_anchor_term_reads_an_unknown_vector_as_the_median_and_the_unscored_stay_last():
@@ -174,4 +190,4 @@ def test_an_anchor_term_reads_an_unknown_vector_as_the_median_and_the_unscored_s
     assert term == pytest.approx([0.0, CAP * 2 / 3, CAP, CAP * 4 / 3])
     assert not piece_rank._anchor_term(np.array([[np.nan], [1.0], [2.0]]), 0, 1.0).any()  # no anchor vector
     found = [_own(1.0 * CAP), None, _own(2.0 * CAP), _own(1.5 * CAP)]
-    assert piece_rank.by_score(found, vectors, anchor=1.0)[-1] == 1
+    assert piece_rank.by_score(found, vectors, anchor=1.0, page=1)[-1] == 1
