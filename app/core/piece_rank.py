@@ -40,8 +40,8 @@ COARSE_KEEP = 100
 COARSE_POINTS = 32  # an eighth of the samples: an eighth of a full match's cost per model
 COARSE_SCAN = 2000  # models the coarse pass reads, nearest first: all of a collection of this size
 # past its first PAGE candidates the order is anchored on its first hit (by_score): the others'
-# whole-shape distance to it, over the median such distance, weighs this many CAPs (picked on SHREC'11's
-# picking split: 0.1-1.0 within 0.3 mAP of each other, docs/partial.md)
+# whole-shape distance to it, over the median such distance, weighs this many CAPs (SHREC'11's picking
+# split: 0.1-1.0 within 1.2 mAP of each other on every set, docs/partial.md)
 ANCHOR = 0.25
 PAGE = 10  # the first page of a piece's hits is ordered by the scores alone
 
@@ -119,7 +119,7 @@ def by_score(found: Sequence[PartialMatch | None], vectors: np.ndarray | None = 
     query) over the median such distance (a candidate of unknown vector: the median). Why: whole
     shapes are compared reliably by their global vectors (SHREC'11 whole queries: 99 mAP), so past the
     first page the first hit's class-mates come before look-alikes of one part (held-out SHREC'11
-    pieces +0.8 to +2.0 mAP); the first page is left to the scores because, when the first hit is
+    pieces +0.8 to +2.3 mAP); the first page is left to the scores because, when the first hit is
     wrong, anchoring it too would fill the page with the wrong class (the right class in the first 10
     for 0.79 of the pieces instead of 0.85; docs/partial.md)."""
     rank = np.array([m.score if m is not None else np.inf for m in found], dtype=np.float64)
@@ -145,7 +145,7 @@ def _anchor(found: Sequence[PartialMatch | None], rank: np.ndarray) -> int | Non
 def _anchor_term(vectors: np.ndarray, first: int, weight: float) -> np.ndarray:
     """(n,) weight x CAP x each candidate's L1 distance to candidate `first` over the median such
     distance (the median where either vector is unknown; 0 when all are)."""
-    if vectors.ndim != 2 or not np.isfinite(vectors[first]).all():
+    if not np.isfinite(vectors[first]).all():
         return np.zeros(len(vectors))
     dist = np.abs(vectors - vectors[first]).sum(axis=1)
     known = np.isfinite(dist)

@@ -92,8 +92,9 @@ def test_a_view_of_a_body_is_described_on_its_double_and_reads_closer_to_its_who
 
 
 def test_a_strip_that_is_all_rim_reads_its_rim_and_is_doubled():
-    """Every vertex of a two-row strip is on its free boundary: none is a cap's centre (a cap's centre
-    has only loop vertices around it), so the rim reads the strip's perimeter over √area."""
+    """Every vertex of a two-row strip is on its free boundary, and none has a neighbour off it: a
+    surface that is all rim has loops and no caps (app.core.partial.rim_length), so the rim reads the
+    strip's perimeter over √area, past DOUBLE_RIM."""
     from app.core.partial import rim_length
 
     n = 40
@@ -103,3 +104,4 @@ def test_a_strip_that_is_all_rim_reads_its_rim_and_is_doubled():
     rim = free_boundary(faces, len(vertices))
     assert rim.all()
     assert np.isclose(rim_length(vertices, faces, rim), (2 * (n - 1) + 2) / np.sqrt(n - 1))
+    assert rim_length(vertices, faces, rim) > DOUBLE_RIM
