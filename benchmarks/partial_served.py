@@ -121,6 +121,7 @@ class Served:
                 mock.patch.object(partial_mod, "stored_vectors", lambda ctx, vid, ids: vectors[list(ids)]), \
                 mock.patch.object(partial_mod, "COARSE_BUDGET_S", float("inf")), \
                 mock.patch.object(partial_mod, "SCORE_BUDGET_S", float("inf")), \
+                mock.patch.object(partial_mod, "FIT_BUDGET_S", float("inf")), \
                 mock.patch.object(partial_mod, "MUTUAL", 1.0), mock.patch.object(partial_mod, "score", keep):
             t = time.perf_counter()
             out = search_mod._scored(None, description.local, hits,  # type: ignore[arg-type]
@@ -149,6 +150,11 @@ ALTERNATIVES: dict[str, Callable[[PartialMatch], float]] = {
     "vote x1": lambda m: m.distance - CAP * m.vote,
     "mutual 1 + vote x0.5": lambda m: m.distance - CAP * m.mutual - 0.5 * CAP * m.vote,
 }
+
+
+def own_index(mnames: list[str], qname: str) -> int:
+    """The collection's index of the model a piece was made from (-1: none of that name)."""
+    return mnames.index(qname) if qname in mnames else -1
 
 
 def full_ranking(head: np.ndarray, order: np.ndarray) -> np.ndarray:
@@ -183,6 +189,7 @@ def run_set(name: str, qdir: Path, served: Served, labels: np.ndarray, mnames: l
     vocab = Vocabulary.load(VOCABULARY)
     res: dict[str, list[float]] = {k: [] for k in ("g_ap", "g_nn", "s_ap", "s_nn", "among")}
     wrong: Counter[str] = Counter()
+    fits: Counter[str] = Counter()
     own, fwd_same, fwd_other, pieces = [], [], [], 0
     served.seconds.clear()
     extra: dict[str, list[tuple[float, float]]] = {}
@@ -203,6 +210,13 @@ def run_set(name: str, qdir: Path, served: Served, labels: np.ndarray, mnames: l
         res["s_ap"].append(100 * average_precision(ranked, r.label, total))
         res["s_nn"].append(float(ranked[0] == r.label))
         res["among"].append(float((labels[cand] == r.label).any()))
+        # the fits (app.core.piece_fit): the candidates the piece was shown to lie on, by class
+        lying = [int(h.model.id) for h in hits if h.fit is not None and h.fit.lies_on]
+        fits["pieces"] += bool(lying)
+        fits["source"] += own_index(mnames, qname) in lying
+        fits["other class"] += sum(labels[j] != r.label for j in lying)
+        fits["same class, not the source"] += sum(labels[j] == r.label and j != own_index(mnames, qname)
+                                                  for j in lying)
         if ranked[0] != r.label:
             wrong[f"{r.label} > {ranked[0]}"] += 1
         own_j = mnames.index(qname)
@@ -235,6 +249,7 @@ def run_set(name: str, qdir: Path, served: Served, labels: np.ndarray, mnames: l
         "wrong": dict(wrong.most_common()), "own": np.array(own).tolist(),
         "forward_same_class": float(np.mean(fwd_same)) if fwd_same else float("nan"),
         "forward_other_class": float(np.mean(fwd_other)) if fwd_other else float("nan"),
+        "fits": dict(fits),
         "ideas": {k: [float(np.mean([a for a, _ in v])), float(np.mean([n for _, n in v]))]
                   for k, v in extra.items()},
         "per_piece": per_piece,
@@ -287,6 +302,10 @@ def print_set(s: dict[str, Any]) -> None:
     print(f"  global   mAP {s['global_map']:6.2f}  NN {s['global_nn']:.3f}")
     print(f"  served   mAP {s['served_map']:6.2f}  NN {s['served_nn']:.3f}   partial stage "
           f"{s['partial_s_median']:.2f} s median, {s['partial_s_max']:.2f} s max (one process)")
+    f = s.get("fits", {})
+    print(f"  fitted: the piece lies on some hit for {f.get('pieces', 0)} pieces; on its source for "
+          f"{f.get('source', 0)}, on another model of its class {f.get('same class, not the source', 0)}"
+          f" times, on a model of another class {f.get('other class', 0)} times")
     for name, (m, n) in s["ideas"].items():
         print(f"  {name:24s} mAP {m:6.2f}  NN {n:.3f}")
     print(f"  forward of other candidates: same class {s['forward_same_class']:.3f}, other classes "

@@ -161,6 +161,16 @@ class MatchedRegion(BaseModel):
     )
 
 
+class PieceFitPublic(BaseModel):
+    """A piece fitted onto a model by a similarity (moved, rescaled, possibly mirrored), then ICP."""
+
+    lies_on: bool = Field(description="the fit shows the query lies on this model's surface: a piece of it")
+    covered: float = Field(ge=0.0, le=1.0, description="share of the query's samples within one vertex"
+                           " spacing of the model's surface (at the canonical resolution) once fitted")
+    share: float = Field(ge=0.0, description="the share of the model's area the fitted query stands for")
+    mirrored: bool = Field(description="the fit mirrors the query")
+
+
 class SearchHit(BaseModel):
     model_id: int
     name: str
@@ -191,6 +201,12 @@ class SearchHit(BaseModel):
         None, ge=1, description="the model is a multi-object file (a print plate, an assembly) and the query"
         " matched this one of its objects (1 = its largest distinct object; `distance` is to that object);"
         " null when the model's whole shape matched (docs/partial.md, \"Parts of multi-object files\")"
+    )
+    fit: PieceFitPublic | None = Field(
+        None, description="a piece's hits (`partial` true) that it was fitted onto: whether it lies on the"
+        " model, with the numbers (docs/partial.md, \"A piece fitted onto its source\"); null when not"
+        " fitted (a whole query, a candidate the fit's screen passed over, or a model described before"
+        " its surface was stored)"
     )
     relation: str | None = Field(
         None, description="the verified variant relation of the query to this model, when there is one"

@@ -58,6 +58,9 @@ class LocalSignature:
              not change (a surface scaled by s read at s²t), where the slopes say only how it falls; the
              level at a later grid time is this plus the cumulated (slope + 1)·log(ratio). None in
              descriptions saved before it was stored
+    surface: (n, 3) float16, the described mesh's vertices at unit area (the piece's own for one solved on
+             its double), which `vertex` indexes: where the samples lie, for a fit of a piece onto a model
+             (app.core.piece_fit); None in descriptions saved before it was stored
     """
 
     slopes: np.ndarray
@@ -66,6 +69,7 @@ class LocalSignature:
     rim: float
     vertex: np.ndarray | None = None
     level: np.ndarray | None = None
+    surface: np.ndarray | None = None
 
 
 def log_heat(spectrum: Spectrum, times: np.ndarray) -> np.ndarray:

@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -78,6 +79,9 @@ class PartialMatch:
     # (p,) each query sample's nearest squared distance at that scale (inf: not trusted there), which
     # votes() compares across candidates; None for a model with no trusted sample
     nearest: np.ndarray | None = field(default=None, repr=False, compare=False)
+    # the fit of the piece onto this model (app.core.piece_fit.PieceFit), set by the ranking for the
+    # candidates it fitted; None: not fitted
+    fit: Any = field(default=None, repr=False, compare=False)
 
     @property
     def own(self) -> float:
@@ -112,7 +116,8 @@ def head(signature: LocalSignature, count: int) -> LocalSignature:
     vertex = None if signature.vertex is None else signature.vertex[:count]
     level = None if signature.level is None else signature.level[:count]
     return LocalSignature(slopes=signature.slopes[:count], area=signature.area[:count],
-                          valid=signature.valid[:count], rim=signature.rim, vertex=vertex, level=level)
+                          valid=signature.valid[:count], rim=signature.rim, vertex=vertex, level=level,
+                          surface=signature.surface)
 
 
 def level_at(query: LocalSignature, shift: int, params: LocalParams) -> np.ndarray | None:

@@ -19,6 +19,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial.distance import cdist
 
+from app.core import piece_fit
 from app.core.partial import LocalParams, LocalSignature
 from app.core.partial_match import (
     CAP,
@@ -109,7 +110,7 @@ def with_peers(found: Sequence[PartialMatch | None], vectors: np.ndarray, count:
 
 
 def by_score(found: Sequence[PartialMatch | None], vectors: np.ndarray | None = None,
-             anchor: float | None = None, page: int | None = None) -> list[int]:
+             anchor: float | None = None, page: int | None = None, lead: Sequence[int] = ()) -> list[int]:
     """Indices of `found` (candidates in global order) by score, the unscored last in their order.
 
     vectors (n, d): the candidates' stored fused vectors (a row of NaN where unknown), given to anchor
@@ -121,13 +122,17 @@ def by_score(found: Sequence[PartialMatch | None], vectors: np.ndarray | None = 
     first page the first hit's class-mates come before look-alikes of one part (held-out SHREC'11
     pieces +0.8 to +2.3 mAP); the first page is left to the scores because, when the first hit is
     wrong, anchoring it too would fill the page with the wrong class (the right class in the first 10
-    for 0.79 of the pieces instead of 0.85; docs/partial.md)."""
+    for 0.79 of the pieces instead of 0.85; docs/partial.md).
+    lead: candidates shown to contain the piece (app.core.piece_fit), in their order: they come first,
+    the first of them is the anchor, and the page after them is anchored too (a fit is evidence, not
+    a score: its class-mates follow it)."""
     rank = np.array([m.score if m is not None else np.inf for m in found], dtype=np.float64)
-    order = sorted(range(len(found)), key=lambda j: (rank[j], j))
-    page = PAGE if page is None else page
+    lead = [j for j in dict.fromkeys(lead) if found[j] is not None]
+    order = lead + [j for j in sorted(range(len(found)), key=lambda j: (rank[j], j)) if j not in set(lead)]
+    page = (len(lead) if lead else PAGE) if page is None else page
     if vectors is None or len(found) <= page:
         return order
-    first = _anchor(found, rank)
+    first = lead[0] if lead else _anchor(found, rank)
     if first is None:
         return order
     rest = order[page:]
@@ -182,5 +187,6 @@ def piece_order(query: LocalSignature, order: np.ndarray,
     held = None if vectors is None else np.asarray(vectors)[candidates]
     if held is not None:
         found = with_peers(found, held)
-    ranked = candidates[by_score(found, held)]
+    fits = piece_fit.fitted(query, [signature_of(int(i)) for i in candidates], found, params)
+    ranked = candidates[by_score(found, held, lead=piece_fit.leading(fits))]
     return np.concatenate([ranked, order[~np.isin(order, ranked)]])

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -195,6 +195,8 @@ def local_members(local: LocalSignature) -> dict[str, Any]:
         out["local_vertex"] = local.vertex
     if local.level is not None:
         out["local_level"] = local.level
+    if local.surface is not None:
+        out["local_surface"] = local.surface
     return out
 
 
@@ -214,8 +216,9 @@ def _local(z: np.lib.npyio.NpzFile) -> LocalSignature | None:
         return None
     vertex = z["local_vertex"] if "local_vertex" in z.files else None  # stored since the matched region
     level = z["local_level"] if "local_level" in z.files else None  # stored since the level's weight
+    surface = z["local_surface"] if "local_surface" in z.files else None  # stored since the piece fit
     return LocalSignature(slopes=z["local_slopes"], area=z["local_area"], valid=z["local_valid"],
-                          rim=float(z["local_rim"]), vertex=vertex, level=level)
+                          rim=float(z["local_rim"]), vertex=vertex, level=level, surface=surface)
 
 
 def canonical_mesh(mesh: Mesh, params: DescribeParams) -> Mesh:
@@ -318,6 +321,7 @@ def _from_canonical(mesh: Mesh, input_noise: float, fine: Mesh, rim: np.ndarray,
     trusted = rim_now if solve is work else np.zeros(n, dtype=bool)
     local = local_signature(own, solve.vertices[:n], work.faces, areas, trusted, LOCAL,
                             measured_rim=rim_value)
+    local = replace(local, surface=work.vertices.astype(np.float16))  # unit area, the piece's own
     clock.lap("local")
     return [
         ShapeDescription(hks=hks32, weights=weights, keypoints=mask, eigenvalues=spectrum.eigenvalues,

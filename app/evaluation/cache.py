@@ -58,7 +58,7 @@ class Variant:
 # being tuned, a module is split in two) must invalidate it, or an evaluation would silently report
 # stale descriptions
 _NOT_DESCRIBE = ("vocabulary", "fusion", "descriptor", "metrics", "baselines", "variants", "partial_match",
-                 "piece_rank")
+                 "piece_rank", "piece_fit")
 _NOT_D2 = ("vocabulary", "fusion", "descriptor", "metrics", "laplacian", "spectrum", "hks", "keypoints",
            "pipeline", "smoothing")
 

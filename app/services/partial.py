@@ -28,12 +28,12 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from app.core import piece_rank
+from app.core import piece_fit, piece_rank
 from app.core.partial import LocalSignature
 from app.core.partial_match import MUTUAL, PartialMatch, Region, head, match_many
 from app.core.partial_match import regions as regions_of
@@ -56,6 +56,10 @@ CACHE_SIZE = 4096  # local signatures kept in memory (about 22 kB each)
 # 2.4-4.6 ms a candidate on 2 loaded cores: RERANK of them fit, a slow disk or a busy host does not
 SCORE_BUDGET_S = 2.0
 CHUNK = 16  # candidates scored between two looks at the clock
+# the fits of a piece onto its likeliest candidates (app.core.piece_fit) have their own deadline, looked at
+# between two fits; the first FIT_ALWAYS are always made
+FIT_BUDGET_S = 1.0
+FIT_ALWAYS = 4
 
 
 @dataclass
@@ -66,12 +70,14 @@ class Work:
     coarse pass: a whole query, or a collection no larger than GLOBAL_KEEP); scored / scored_of: the
     candidates reached by the full scoring of those chosen (a model without a local signature counts as
     reached: it has no score to compute). Fewer read than asked: COARSE_BUDGET_S (SCORE_BUDGET_S) cut it.
-    seconds: per step (coarse, score, vote, peers, regions; search.py adds the hit records)."""
+    fitted: the candidates the piece was fitted onto (app.core.piece_fit; FIT_BUDGET_S may cut them).
+    seconds: per step (coarse, score, vote, peers, fit, regions; search.py adds the hit records)."""
 
     coarse_read: int = 0
     coarse_of: int = 0
     scored: int = 0
     scored_of: int = 0
+    fitted: int = 0
     seconds: dict[str, float] = field(default_factory=dict)
 
     @property
@@ -220,14 +226,15 @@ def stored_vectors(ctx: ServiceContext, vocabulary_id: int, model_ids: Sequence[
 
 
 def ordered(ctx: ServiceContext, vocabulary_id: int | None, model_ids: Sequence[int],
-            found: list[PartialMatch | None], work: Work | None = None
-            ) -> tuple[list[int], list[PartialMatch | None]]:
-    """(indices of model_ids in served order, the matches with their peers set): the scored
-    candidates' scores averaged with their nearest fellow candidates' (app.core.piece_rank.with_peers),
-    then ordered by score, past the first page anchored on the first hit (piece_rank.by_score), from
-    the stored vectors of those scored (at most RERANK) read in one query under `vocabulary_id` (None:
-    no vectors, each its own score and no anchor): bounded work after the scoring's deadline. work:
-    gets its seconds."""
+            found: list[PartialMatch | None], work: Work | None = None,
+            query: LocalSignature | None = None) -> tuple[list[int], list[PartialMatch | None]]:
+    """(indices of model_ids in served order, the matches with their peers and fits set): the scored
+    candidates' scores averaged with their nearest fellow candidates' (app.core.piece_rank.with_peers)
+    from the stored vectors of those scored (at most RERANK) read in one query under `vocabulary_id`
+    (None: no vectors, each its own score and no anchor); then the query fitted onto the most likely of
+    them (fitted(), given the query); then ordered by piece_rank.by_score: the candidates the query
+    lies on first, the rest by score, anchored on the first hit. Bounded work after the scoring's
+    deadline. work: gets its seconds."""
     t = time.perf_counter()
     scored = [j for j, m in enumerate(found) if m is not None]
     out, vectors = list(found), None
@@ -237,10 +244,28 @@ def ordered(ctx: ServiceContext, vocabulary_id: int | None, model_ids: Sequence[
             vectors = np.full((len(found), read.shape[1]), np.nan)
             vectors[scored] = read
             out = piece_rank.with_peers(found, vectors)
-    order = piece_rank.by_score(out, vectors)
     if work is not None:
         work.seconds["peers"] = time.perf_counter() - t
-    return order, out
+    lead: list[int] = []
+    if query is not None:
+        t = time.perf_counter()
+        out = fitted(ctx, query, model_ids, out, FIT_BUDGET_S)
+        lead = piece_fit.leading([m.fit if m is not None else None for m in out])
+        if work is not None:
+            work.seconds["fit"] = time.perf_counter() - t
+            work.fitted = sum(m is not None and m.fit is not None for m in out)
+    return piece_rank.by_score(out, vectors, lead=lead), out
+
+
+def fitted(ctx: ServiceContext, query: LocalSignature, model_ids: Sequence[int],
+           found: list[PartialMatch | None], budget_s: float) -> list[PartialMatch | None]:
+    """The matches with `fit` set for the candidates app.core.piece_fit chooses (the best screens and
+    the first by score), fitted best screen first until `budget_s` is spent (the first FIT_ALWAYS
+    always): each model's signature from the LRU the scoring filled."""
+    sigs = [local_of(ctx, model_ids[j]) if m is not None else None for j, m in enumerate(found)]
+    fits = piece_fit.fitted(query, sigs, found, LOCAL, time.monotonic() + budget_s, FIT_ALWAYS)
+    return [replace(m, fit=f) if m is not None and f is not None else m
+            for m, f in zip(found, fits, strict=True)]
 
 
 def regions(ctx: ServiceContext, query: LocalSignature | None, model_ids: Sequence[int],

@@ -10,6 +10,7 @@ import numpy as np
 from app.core.object_rows import merge_rows
 from app.core.partial import LocalSignature
 from app.core.partial_match import Region
+from app.core.piece_fit import PieceFit
 from app.core.pipeline import ShapeDescription
 from app.services import fusion_rerank
 from app.services import partial as partial_mod
@@ -34,6 +35,7 @@ class Hit:
     rerank: float | None = None  # the distance the hits are ordered by (services/fusion_rerank)
     region: Region | None = None  # a piece's: where it matched in the model (app.core.partial_match)
     part: int = 0  # the model's row that matched: 0 its whole, p > 0 its object row p (services/object_rows)
+    fit: PieceFit | None = None  # a piece's: its fit onto this model (app.core.piece_fit), if it was fitted
 
 
 @dataclass(frozen=True)
@@ -140,7 +142,7 @@ def _scored(ctx: ServiceContext, local: LocalSignature | None, hits: list[Hit], 
         hits = hits[:k]
     found = partial_mod.score(ctx, local, [h.model.id for h in hits], work)
     if piece:
-        order, found = partial_mod.ordered(ctx, vocabulary_id, [h.model.id for h in hits], found, work)
+        order, found = partial_mod.ordered(ctx, vocabulary_id, [h.model.id for h in hits], found, work, local)
         hits, found = [hits[j] for j in order[:k]], [found[j] for j in order[:k]]
     where: list[Region | None] = [None] * len(hits)
     if piece:
@@ -150,7 +152,7 @@ def _scored(ctx: ServiceContext, local: LocalSignature | None, hits: list[Hit], 
             work.seconds["regions"] = time.perf_counter() - t
     return [
         replace(h, rank=rank, forward=m.forward if m else None, reverse=m.reverse if m else None,
-                partial=piece, region=r)
+                partial=piece, region=r, fit=m.fit if m else None)
         for rank, (h, m, r) in enumerate(zip(hits, found, where, strict=True), start=1)
     ]
 

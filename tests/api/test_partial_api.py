@@ -231,3 +231,25 @@ def test_a_deadline_that_cuts_the_matching_is_reported(partial_dir, monkeypatch)
     assert work["scored"] == 1 and work["scored_of"] in (3, 4) and work["score_cut"]
     assert len(body["data"]) == work["scored_of"]
     assert [h["forward"] is not None for h in body["data"]] == [True] + [False] * (work["scored_of"] - 1)
+
+
+def test_a_piece_of_a_stored_model_moved_and_rescaled_is_fitted_onto_it_first(tmp_path):
+    """The piece lies on the model it was cut from (app.core.piece_fit): that hit leads and says so with
+    its numbers; no other model is said to hold it. The models are at the canonical resolution, so the
+    piece keeps its whole's vertices, as a piece cut from a stored model does."""
+    from tests.core.conftest import _random_rotation
+    from tests.core.test_piece_fit import _canonical, _moved, _piece
+
+    ctx = open_context(make_settings(tmp_path / "data", describe=DESCRIBE))
+    shapes = {n: _canonical(m) if n != "torus" else m for n, m in _shapes().items()}
+    ids = {n: ingestion.submit(ctx, _obj(m), f"{n}.obj", name=n, label=n).model.id for n, m in shapes.items()}
+    describe_and_fit(ctx)
+    piece = _moved(_piece(shapes["quadruped"]), _random_rotation(11), 25.4, mirror=False)
+    with TestClient(create_app(make_settings(tmp_path / "data", describe=DESCRIBE))) as client:
+        body = _search(client, _obj(piece))
+    hits = body["data"]
+    assert hits[0]["model_id"] == ids["quadruped"] and hits[0]["partial"]
+    fit = hits[0]["fit"]
+    assert fit["lies_on"] and fit["covered"] >= 0.8 and 0.6 <= fit["share"] <= 0.9 and not fit["mirrored"]
+    assert not any(h["fit"] and h["fit"]["lies_on"] for h in hits[1:])
+    assert "partial.fit" in body["seconds"]

@@ -236,6 +236,7 @@ def by_stages(mesh: Mesh, p: DescribeParams, flt: KeypointFilter | None = None) 
     mask = detect(raw, work.faces, flt or p.keypoint_filter)
     rim = free_boundary(work.faces, work.n_vertices)
     local = local_signature(spectrum, work.vertices, work.faces, mass.diagonal(), rim, LOCAL)
+    local = dataclasses.replace(local, surface=work.vertices.astype(np.float16))  # where the samples lie
     return ShapeDescription(hks=hks_mod.normalize(raw).astype(np.float32),
                             weights=mass.diagonal().astype(np.float32), keypoints=mask,
                             eigenvalues=spectrum.eigenvalues, input_vertices=mesh.n_vertices, local=local,
@@ -255,7 +256,8 @@ def same_local(a: ShapeDescription, b: ShapeDescription) -> bool:
     return (np.array_equal(a.local.slopes, b.local.slopes) and np.array_equal(a.local.area, b.local.area)
             and np.array_equal(a.local.valid, b.local.valid) and a.local.rim == b.local.rim
             and np.array_equal(a.local.vertex, b.local.vertex)
-            and np.array_equal(a.local.level, b.local.level))
+            and np.array_equal(a.local.level, b.local.level)
+            and np.array_equal(a.local.surface, b.local.surface))
 
 
 # --- parameters -------------------------------------------------------------------------------------
@@ -432,11 +434,14 @@ def test_a_description_round_trips_through_npz_bit_for_bit(tmp_path):
         assert getattr(again, name).dtype == getattr(desc, name).dtype, name
     assert type(again.input_vertices) is int and again.input_vertices == 42
     assert again.seconds == {}  # timings are not stored
+    # where the samples lie: the described surface's vertices at unit area, as stored
+    assert again.local.surface.dtype == np.float16 and np.array_equal(again.local.surface, desc.local.surface)
+    assert again.local.surface.shape == (desc.n_vertices, 3)
     with np.load(tmp_path / "d.npz") as z:
         assert sorted(z.files) == [
             "eigenvalues", "format", "hks_packed", "hks_shape", "input_noise", "input_vertices", "keypoints",
-            "local_area", "local_level", "local_rim", "local_slopes", "local_valid", "local_vertex",
-            "weights"
+            "local_area", "local_level", "local_rim", "local_slopes", "local_surface", "local_valid",
+            "local_vertex", "weights"
         ]
         assert int(z["format"]) == DESCRIPTION_FORMAT == 3
     # of the mesh as given (NaN for the 42-vertex cigar: too few vertices to tell noise from shape)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import mimetypes
 from typing import Annotated, Literal
 
+import numpy as np
 from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, JSONResponse
@@ -22,12 +23,14 @@ from app.api.schemas import (
     ModelPublic,
     ModelsPublic,
     PartialWork,
+    PieceFitPublic,
     SearchHit,
     SearchResponse,
 )
 from app.api.space import RoomDep
 from app.api.uploads import multipart_body, read_form
 from app.core.partial_match import Region
+from app.core.piece_fit import PieceFit
 from app.services import catalog, ingestion, metadata, rendering, search, variants, views
 from app.services.errors import InvalidInputError, NotFoundError
 
@@ -190,6 +193,13 @@ def _region(region: Region | None) -> MatchedRegion | None:
     return MatchedRegion(vertices=[int(v) for v in region.vertex], weights=weights)
 
 
+def _fit(fit: PieceFit | None) -> PieceFitPublic | None:
+    if fit is None:
+        return None
+    return PieceFitPublic(lies_on=fit.lies_on, covered=round(fit.covered, 4), share=round(fit.share, 4),
+                          mirrored=bool(np.linalg.det(fit.rotation) < 0))
+
+
 def to_response(
     result: search.SearchResult,
     relations: dict[int, str] | None = None,
@@ -203,7 +213,7 @@ def to_response(
             model_id=h.model.id, name=h.model.name, label=h.model.label, distance=h.distance, rank=h.rank,
             rerank_distance=h.rerank, forward=h.forward, reverse=h.reverse, partial=h.partial,
             region=_region(h.region), relation=relations.get(h.model.id), evidence=evidence.get(h.model.id),
-            matched_object=h.part or None,
+            matched_object=h.part or None, fit=_fit(h.fit),
         )
         for h in result.hits
     ]

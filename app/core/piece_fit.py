@@ -1,0 +1,204 @@
+"""Where a piece lies on a model: a similarity fit that shows the piece was cut from it (issue 33).
+
+The local signatures rank a piece's candidates by how alike their heat is; they cannot tell the model
+a piece was cut from from a class-mate or a look-alike of one limb. Geometry can: a piece of a stored
+model, moved, rescaled or mirrored, lies on that model's surface, and on no other.
+
+Per candidate (both signatures must carry their `surface`):
+1. pairs: each trusted query sample and its nearest model sample in slopes, at the match's scale
+   hypothesis (PartialMatch.shift), the pairs the partial distance already reads;
+2. a screen: HYPOTHESES similarities (half of them mirrored), each the least-squares fit of three pairs
+   drawn at random (a fixed seed: the same answer every time), those whose scale gives the piece a share
+   of the model's area outside SHARE refused; the screen's score is the best one's share of pairs that
+   agree within INLIER model vertex spacings;
+3. the fit, for the candidates with the best screens (and the best scores): trimmed ICP of the piece's
+   samples onto the model's vertices, with scale, from the STARTS best hypotheses;
+4. covered: the share of the piece's samples within COVER model vertex spacings of a model vertex.
+   A fit with covered >= COVERED (and its share in SHARE) shows the piece lies on the model.
+
+Coordinates are each surface's at unit area (the describe's), so scale² is the share of the model's
+area the piece stands for. Measured on SHREC'11's held-out pieces (docs/partial.md): the source of a
+piece passes for 0.74-0.95 of them, a model of another class for none of about 100,000 fits.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from app.core.partial import LocalParams, LocalSignature
+from app.core.partial_match import PartialMatch, _at_shift
+from app.core.variants.align import Similarity, icp_batch, umeyama_batch
+
+HYPOTHESES = 256  # similarities drawn by the screen, half of them mirrored
+INLIER = 3.0  # a pair agrees with a similarity within this many spacings (the even mesh's: spacing())
+SHARE = (0.2, 1.25)  # the share of the model's area a piece may stand for (scale²)
+STARTS = 4  # the screen's best similarities that ICP starts from
+ROUNDS = 20  # ICP rounds at most
+COVER = 1.0  # a piece sample lies on the model within this many model vertex spacings
+COVERED = 0.8  # share of the piece's samples that must lie on the model
+MIN_PAIRS = 8  # fewer trusted pairs: no screen
+SURE = 0.4  # the share of the pairs, those whose slopes agree best, the hypotheses are drawn from
+# candidates fitted per piece: the best by screen, and the first by score (SHREC'11's held-out pieces:
+# the sources that pass are within these for 0.93-1.00 of the pieces, docs/partial.md)
+BY_SCREEN = 32
+BY_SCORE = 10
+CHUNK = 32  # candidates screened between two looks at the clock
+
+
+@dataclass(frozen=True)
+class Screen:
+    """A candidate's screen: the share of its pairs that the best similarity agrees with, and the
+    STARTS best similarities (query sample coordinates -> model coordinates)."""
+
+    inliers: float
+    starts: tuple[Similarity, ...]
+
+
+@dataclass(frozen=True)
+class PieceFit:
+    """A piece fitted onto a model: y = scale R x + t takes the piece's coordinates (its surface at
+    unit area) to the model's.
+
+    covered : share of the piece's samples within COVER spacings of the model's vertices, in [0, 1]
+    scale   : the similarity's scale; scale² is the share of the model's area the piece stands for
+    residual: mean distance of the ICP's kept pairs, in model vertex spacings
+    """
+
+    covered: float
+    scale: float
+    residual: float
+    rotation: np.ndarray
+    translation: np.ndarray
+
+    @property
+    def share(self) -> float:
+        return self.scale * self.scale
+
+    @property
+    def lies_on(self) -> bool:
+        """Whether the fit shows the piece lies on the model."""
+        return self.covered >= COVERED and SHARE[0] <= self.share <= SHARE[1]
+
+
+def spacing(vertices: np.ndarray) -> float:
+    """The mean edge of a triangulation of `vertices` (n, 3) spread evenly over unit area:
+    sqrt(2 / (√3 n)), the yardstick of the screen (a fit measures the real one)."""
+    return float(np.sqrt(2.0 / (np.sqrt(3.0) * max(len(vertices), 1))))
+
+
+def points(signature: LocalSignature) -> np.ndarray | None:
+    """(p, 3) the samples' coordinates (None: the signature has no surface or sample vertices)."""
+    if signature.surface is None or signature.vertex is None:
+        return None
+    return signature.surface[signature.vertex].astype(np.float64)
+
+
+def _surface(signature: LocalSignature) -> np.ndarray:
+    """(n, 3) the surface's vertices (an empty array when it has none)."""
+    return np.zeros((0, 3)) if signature.surface is None else signature.surface
+
+
+def screens(query: LocalSignature, models: Sequence[LocalSignature], found: Sequence[PartialMatch],
+            params: LocalParams, seed: int = 0) -> list[Screen | None]:
+    """One screen per model (None: a surface missing, or fewer than MIN_PAIRS trusted pairs), each at
+    its match's shift. The models of one shift are paired in one product (partial_match._at_shift)."""
+    out: list[Screen | None] = [None] * len(models)
+    qpoints = points(query)
+    if qpoints is None:
+        return out
+    usable = [i for i, m in enumerate(models) if m.surface is not None and m.vertex is not None]
+    rng = np.random.default_rng(seed)
+    mirrored = np.arange(HYPOTHESES) >= HYPOTHESES // 2
+    for j, rows, _, cols, d in _at_shift(query, [models[i] for i in usable],
+                                        [found[i].shift for i in usable], params):
+        if len(rows) < MIN_PAIRS:
+            continue
+        model = models[usable[j]]
+        mpoints = points(model)
+        assert mpoints is not None
+        nearest = np.argmin(d, axis=1)
+        src, dst = qpoints[rows], mpoints[cols[nearest]]  # (p', 3) each
+        # the hypotheses are drawn from the pairs whose slopes agree best: more of them are right
+        agreeing = np.argsort(d[np.arange(len(rows)), nearest], kind="stable")
+        sure = agreeing[:max(MIN_PAIRS, int(SURE * len(rows)))]
+        pick = sure[rng.integers(0, len(sure), size=(HYPOTHESES, 3))]
+        rotation, scale, shift = umeyama_batch(src[pick], dst[pick], mirrored, True)
+        allowed = (scale * scale >= SHARE[0]) & (scale * scale <= SHARE[1])
+        moved = scale[:, None, None] * src[None] @ rotation.transpose(0, 2, 1) + shift[:, None]  # (h, p', 3)
+        agree = (np.linalg.norm(moved - dst[None], axis=2) < INLIER * spacing(_surface(model))).sum(axis=1)
+        agree = np.where(allowed, agree, 0)
+        best = np.argsort(-agree, kind="stable")[:STARTS]
+        starts = tuple(Similarity(float(scale[b]), rotation[b], shift[b]) for b in best if agree[b] > 0)
+        out[usable[j]] = Screen(float(agree[best[0]]) / len(src), starts)
+    return out
+
+
+def fit(query: LocalSignature, model: LocalSignature, screen: Screen) -> PieceFit | None:
+    """The piece's samples fitted onto the model's vertices by trimmed ICP from the screen's starts,
+    the fit that covers most (None: no start, or a surface missing)."""
+    qpoints = points(query)
+    if qpoints is None or model.surface is None or not screen.starts:
+        return None
+    target = model.surface.astype(np.float64)
+    tree = cKDTree(target)
+    gap = float(np.median(tree.query(target, k=2)[0][:, 1]))  # the model's own vertex spacing
+    fits, costs = icp_batch(qpoints, tree, target, list(screen.starts), ROUNDS, with_scale=True)
+    best: PieceFit | None = None
+    for f, cost in zip(fits, costs, strict=True):
+        moved = f.scale * qpoints @ f.rotation.T + f.translation
+        near = tree.query(moved)[0]
+        got = PieceFit(covered=float((near < COVER * gap).mean()), scale=f.scale,
+                       residual=float(cost) / gap if gap > 0 else float("inf"),
+                       rotation=f.rotation, translation=f.translation)
+        if best is None or (got.lies_on, got.covered) > (best.lies_on, best.covered):
+            best = got
+    return best
+
+
+def to_fit(screened: Sequence[Screen | None], by_score: Sequence[int]) -> list[int]:
+    """Indices of the candidates to fit: the BY_SCREEN best screens and the first BY_SCORE of
+    `by_score` (candidate indices in score order) that have a screen, best screens first."""
+    ranked = sorted((j for j, s in enumerate(screened) if s is not None and s.starts),
+                    key=lambda j: (-screened[j].inliers, j))  # type: ignore[union-attr]
+    first = [j for j in by_score if screened[j] is not None and screened[j].starts][:BY_SCORE]  # type: ignore[union-attr]
+    return list(dict.fromkeys(ranked[:BY_SCREEN] + first))
+
+
+def fitted(query: LocalSignature, models: Sequence[LocalSignature | None],
+           found: Sequence[PartialMatch | None], params: LocalParams, deadline: float | None = None,
+           always: int = 4) -> list[PieceFit | None]:
+    """One fit (None: not fitted) per candidate: models (their signatures, None: unknown) and found (their
+    matches, None: unscored) align. The candidates to_fit chooses, by their scores' order, fitted best
+    screen first; past `deadline` (time.monotonic(); None: none) only the first `always`."""
+    out: list[PieceFit | None] = [None] * len(found)
+    have = [j for j, (m, s) in enumerate(zip(found, models, strict=True)) if m is not None and s is not None]
+    sigs = [models[j] for j in have]
+    matches = [found[j] for j in have]
+    by_score = sorted(range(len(have)), key=lambda i: (matches[i].score, have[i]))  # type: ignore[union-attr]
+    screened: list[Screen | None] = [None] * len(have)
+    for start in range(0, len(by_score), CHUNK):  # best scores first: a deadline cuts the likeliest last
+        if start and deadline is not None and time.monotonic() > deadline:
+            break
+        part = by_score[start:start + CHUNK]
+        got = screens(query, [sigs[i] for i in part], [matches[i] for i in part], params,  # type: ignore[misc]
+                      seed=start)
+        for i, screen in zip(part, got, strict=True):
+            screened[i] = screen
+    for n, i in enumerate(to_fit(screened, by_score)):
+        if deadline is not None and n >= always and time.monotonic() > deadline:
+            break
+        screen, model = screened[i], sigs[i]
+        assert screen is not None and model is not None
+        out[have[i]] = fit(query, model, screen)
+    return out
+
+
+def leading(fits: Sequence[PieceFit | None]) -> list[int]:
+    """Indices of the fits that show the piece lies on their model, the most covered first."""
+    shown = [j for j, f in enumerate(fits) if f is not None and f.lies_on]
+    return sorted(shown, key=lambda j: (-fits[j].covered, j))  # type: ignore[union-attr]

@@ -1,0 +1,125 @@
+"""app.core.piece_fit: a piece fitted onto the model it was cut from, and onto no other."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import trimesh
+
+from app.config import DescribeSettings
+from app.core import piece_fit, piece_rank
+from app.core.mesh import Mesh
+from app.core.partial_match import CAP, PartialMatch, match_many
+from app.core.pipeline import LOCAL, describe
+from app.core.resolution import to_resolution
+from tests.api.test_partial_api import _shapes
+
+PARAMS = DescribeSettings(k=300, m=20, target_vertices=1000).params()
+
+
+def _describe(mesh: trimesh.Trimesh):
+    return describe(Mesh(np.asarray(mesh.vertices, float), np.asarray(mesh.faces)), PARAMS).local
+
+
+def _moved(mesh: trimesh.Trimesh, rotation: np.ndarray, scale: float, mirror: bool) -> trimesh.Trimesh:
+    """The mesh under x -> scale R M x + t (M mirrors x when `mirror`), its faces rewound if mirrored."""
+    m = np.diag([-1.0, 1.0, 1.0]) if mirror else np.eye(3)
+    vertices = scale * np.asarray(mesh.vertices) @ (rotation @ m).T + np.array([3.0, -1.0, 7.0])
+    faces = np.asarray(mesh.faces)[:, ::-1] if mirror else np.asarray(mesh.faces)
+    return trimesh.Trimesh(vertices, faces, process=False)
+
+
+def _canonical(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The mesh at the canonical resolution: described again, it keeps its vertices."""
+    out = to_resolution(Mesh(np.asarray(mesh.vertices, float), np.asarray(mesh.faces)), 1000)
+    return trimesh.Trimesh(out.vertices, out.faces, process=False)
+
+
+def _piece(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """About three quarters of the mesh: the faces on one side of an oblique plane. It keeps enough of
+    the canonical mesh's vertices to be described on them (a piece of a stored model, as cut)."""
+    normal = np.array([0.8, 0.5, 0.33]) / np.linalg.norm([0.8, 0.5, 0.33])
+    height = (mesh.triangles_center - mesh.centroid) @ normal
+    keep = height > np.quantile(height, 0.25)
+    return trimesh.Trimesh(mesh.vertices, mesh.faces[keep], process=True)
+
+
+@pytest.fixture(scope="module")
+def bodies() -> dict:
+    """The five bodies (at the canonical resolution) and the torus, each as a local signature, and a
+    piece of the quadruped."""
+    shapes = {n: _canonical(m) if n != "torus" else m for n, m in _shapes().items()}
+    return {"shapes": {n: _describe(m) for n, m in shapes.items()}, "half": _piece(shapes["quadruped"]),
+            "whole": shapes["quadruped"]}
+
+
+def _fit(query, model) -> piece_fit.PieceFit | None:
+    (match,) = match_many(query, [model], LOCAL)
+    (screen,) = piece_fit.screens(query, [model], [match], LOCAL)
+    return None if screen is None else piece_fit.fit(query, model, screen)
+
+
+@pytest.mark.parametrize("scale,mirror",
+                         [(1.0, False), (25.4, False), (0.001, False), (1.0, True), (0.04, True)])
+def test_a_piece_moved_rescaled_or_mirrored_lies_on_the_model_it_was_cut_from(bodies, random_rotation,
+                                                                                scale, mirror):
+    half = bodies["half"]
+    piece = _describe(_moved(half, random_rotation(7), scale, mirror))
+    got = _fit(piece, bodies["shapes"]["quadruped"])
+    assert got is not None and got.lies_on, got
+    # each surface at unit area: scale² is the share of the whole's area the piece is
+    assert got.share == pytest.approx(half.area / bodies["whole"].area, abs=0.12)
+    assert (np.linalg.det(got.rotation) < 0) == mirror
+    assert got.residual < 1.0  # in vertex spacings: the piece's samples sit on the whole's surface
+
+
+def test_a_piece_lies_on_no_other_shape(bodies):
+    piece = _describe(bodies["half"])
+    for name, model in bodies["shapes"].items():
+        got = _fit(piece, model)
+        assert (got is not None and got.lies_on) == (name == "quadruped"), (name, got)
+
+
+def test_no_surface_no_fit(bodies):
+    piece, model = _describe(bodies["half"]), bodies["shapes"]["quadruped"]
+    (match,) = match_many(piece, [model], LOCAL)
+    assert piece_fit.screens(piece, [replace(model, surface=None)], [match], LOCAL) == [None]
+    assert piece_fit.screens(replace(piece, surface=None), [model], [match], LOCAL) == [None]
+
+
+def test_a_fit_that_shrinks_the_piece_onto_a_corner_shows_nothing():
+    """A piece standing for a share of the model outside SHARE never lies on it, however covered."""
+    small = piece_fit.PieceFit(covered=1.0, scale=0.3, residual=0.0, rotation=np.eye(3),
+                               translation=np.zeros(3))
+    large = replace(small, scale=1.2)
+    fits = [small, replace(small, scale=0.8, covered=0.9), large, replace(small, scale=0.9, covered=0.79),
+            None, replace(small, scale=0.7, covered=0.95)]
+    assert not small.lies_on and not large.lies_on
+    assert piece_fit.leading(fits) == [5, 1]  # those that lie on their model, the most covered first
+
+
+def test_the_candidates_fitted_are_the_best_screens_and_the_first_by_score(monkeypatch):
+    monkeypatch.setattr(piece_fit, "BY_SCREEN", 2)
+    monkeypatch.setattr(piece_fit, "BY_SCORE", 2)
+    start = (piece_fit.Similarity(1.0, np.eye(3), np.zeros(3)),)
+    screened = [piece_fit.Screen(s, start) for s in (0.1, 0.5, 0.2, 0.9)] + [None, piece_fit.Screen(0.8, ())]
+    # by score: 5 (no start: never fitted), 4 (no screen), 0, 2, 1, 3
+    assert piece_fit.to_fit(screened, [5, 4, 0, 2, 1, 3]) == [3, 1, 0, 2]
+
+
+def _own(own: float) -> PartialMatch:
+    return PartialMatch(distance=own, forward=0.5, reverse=0.5, scale=1.0)
+
+
+def test_the_candidates_a_piece_lies_on_lead_and_anchor_the_order_from_the_next_hit():
+    found = [_own(0.1 * CAP), _own(0.2 * CAP), _own(0.9 * CAP), _own(0.3 * CAP), _own(0.25 * CAP), None]
+    vectors = np.array([[0.0], [0.1], [5.0], [5.1], [0.2], [0.0]])
+    # no fit: by score; the first page is all of them here
+    assert piece_rank.by_score(found, vectors) == [0, 1, 4, 3, 2, 5]
+    # the piece lies on candidate 2: it leads, and from the next hit on its neighbours in the global space
+    # (3 before 1, 4 and 0) come first, whatever the page
+    assert piece_rank.by_score(found, vectors, lead=[2]) == [2, 3, 0, 1, 4, 5]
+    # an unscored candidate never leads
+    assert piece_rank.by_score(found, vectors, lead=[5, 2]) == [2, 3, 0, 1, 4, 5]
