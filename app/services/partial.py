@@ -50,7 +50,7 @@ COARSE_POINTS = piece_rank.COARSE_POINTS
 COARSE_SCAN = piece_rank.COARSE_SCAN
 RERANK = GLOBAL_KEEP + COARSE_KEEP  # at most this many candidates get a full match
 COARSE_BUDGET_S = 1.0  # past it the models not yet read are no coarse candidates
-CACHE_SIZE = 4096  # local signatures kept in memory (about 22 kB each)
+CACHE_SIZE = 4096  # local signatures kept in memory (about 28 kB each with their surface)
 # the scoring runs in the API process after the pooled describe, so it needs its own deadline: past it
 # the remaining candidates are left unscored (they follow the scored ones, in their global order).
 # 2.4-4.6 ms a candidate on 2 loaded cores: RERANK of them fit, a slow disk or a busy host does not
