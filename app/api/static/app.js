@@ -73,8 +73,13 @@ function labelChip(label) {
 function shares(hit) {
   if (!hit.partial || hit.forward === null || hit.forward === undefined) return null;
   const pct = (x) => `${Math.round(100 * x)} %`;
-  return el("div", { class: "shares", title: "partial match: the share of the query found in this model, and the share of this model the query covers" },
-    el("span", { class: "forward" }, `found ${pct(hit.forward)}`), " · ", el("span", { class: "reverse" }, `covers ${pct(hit.reverse)}`));
+  const parts = [el("span", { class: "forward" }, `found ${pct(hit.forward)}`), " · ", el("span", { class: "reverse" }, `covers ${pct(hit.reverse)}`)];
+  // fitted onto this model by a similarity: the query is a piece of it (docs/partial.md)
+  if (hit.fit && hit.fit.lies_on) {
+    parts.push(" · ", el("span", { class: "fit", title: `fitted onto this model${hit.fit.mirrored ? " (mirrored)" : ""}: ${pct(hit.fit.covered)} of the query within a vertex spacing of its surface` },
+      `a piece of it (${pct(hit.fit.share)})`));
+  }
+  return el("div", { class: "shares", title: "partial match: the share of the query found in this model, and the share of this model the query covers" }, ...parts);
 }
 
 // ---- results (Figure 1 layout: query card, then the ranked hits) -------------------------------------
