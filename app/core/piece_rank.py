@@ -128,11 +128,16 @@ def by_score(found: Sequence[PartialMatch | None], vectors: np.ndarray | None = 
     a score: its class-mates follow it)."""
     rank = np.array([m.score if m is not None else np.inf for m in found], dtype=np.float64)
     lead = [j for j in dict.fromkeys(lead) if found[j] is not None]
-    order = lead + [j for j in sorted(range(len(found)), key=lambda j: (rank[j], j)) if j not in set(lead)]
-    page = (len(lead) if lead else PAGE) if page is None else page
+    leading = set(lead)
+    order = lead + [j for j in sorted(range(len(found)), key=lambda j: (rank[j], j)) if j not in leading]
+    # a stored copy of the query leads (it lies on itself) but anchors nothing: its global vector is
+    # the piece's own, which is what a piece's whole-shape distance cannot be trusted on; with no other
+    # fit the first page is the scores' as before
+    real = [j for j in lead if found[j].distance > COPY_DISTANCE]  # type: ignore[union-attr]
+    page = (len(lead) if real else max(PAGE, len(lead))) if page is None else page
     if vectors is None or len(found) <= page:
         return order
-    first = lead[0] if lead else _anchor(found, rank)
+    first = real[0] if real else _anchor(found, rank)
     if first is None:
         return order
     rest = order[page:]

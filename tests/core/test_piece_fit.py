@@ -123,3 +123,18 @@ def test_the_candidates_a_piece_lies_on_lead_and_anchor_the_order_from_the_next_
     assert piece_rank.by_score(found, vectors, lead=[2]) == [2, 3, 0, 1, 4, 5]
     # an unscored candidate never leads
     assert piece_rank.by_score(found, vectors, lead=[5, 2]) == [2, 3, 0, 1, 4, 5]
+
+
+def test_a_stored_copy_of_the_query_leads_but_the_first_real_fit_anchors():
+    """A copy of the query (distance about 0) lies on itself and leads; the model the piece was cut
+    from is the anchor of the rest, as a copy's own global vector is the piece's."""
+    from app.core.partial_match import COPY_DISTANCE
+
+    found = [_own(0.1 * CAP), _own(0.2 * CAP), _own(0.9 * CAP), _own(0.3 * CAP), _own(0.25 * CAP),
+             _own(COPY_DISTANCE / 2)]
+    vectors = np.array([[0.0], [0.1], [5.0], [5.1], [0.2], [9.0]])
+    assert piece_rank.by_score(found, vectors, lead=[5, 2]) == [5, 2, 3, 0, 1, 4]
+    # only the copy lies on a fit: the order is the one without fits (the copy first by its score, the
+    # first page by score, the best-scored real candidate the anchor past it)
+    assert piece_rank.by_score(found, vectors, lead=[5]) == piece_rank.by_score(found, vectors)
+    assert piece_rank.by_score(found, vectors, lead=[5], page=1) == [5, 0, 1, 4, 3, 2]
