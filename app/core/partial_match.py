@@ -34,11 +34,14 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from app.core.partial import LocalParams, LocalSignature
+
+if TYPE_CHECKING:  # piece_fit reads this module: the type alone, no import cycle at run time
+    from app.core.piece_fit import PieceFit
 
 MIN_SLOPES = 4  # a sample with fewer trusted slopes than this sits on the rim: it is not compared
 TOLERANCE = 2e-3  # mean squared slope difference under which two samples match
@@ -81,7 +84,7 @@ class PartialMatch:
     nearest: np.ndarray | None = field(default=None, repr=False, compare=False)
     # the fit of the piece onto this model (app.core.piece_fit.PieceFit), set by the ranking for the
     # candidates it fitted; None: not fitted
-    fit: Any = field(default=None, repr=False, compare=False)
+    fit: PieceFit | None = field(default=None, repr=False, compare=False)
 
     @property
     def own(self) -> float:

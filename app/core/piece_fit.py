@@ -61,23 +61,21 @@ class Screen:
 
 @dataclass(frozen=True)
 class PieceFit:
-    """A piece fitted onto a model: y = scale R x + t takes the piece's coordinates (its surface at
-    unit area) to the model's.
+    """A piece fitted onto a model: `similarity` takes the piece's coordinates (its surface at unit
+    area) to the model's.
 
-    covered : share of the piece's samples within COVER spacings of the model's vertices, in [0, 1]
-    scale   : the similarity's scale; scale² is the share of the model's area the piece stands for
-    residual: mean distance of the ICP's kept pairs, in model vertex spacings
+    covered   : share of the piece's samples within COVER spacings of the model's vertices, in [0, 1]
+    residual  : mean distance of the ICP's kept pairs, in model vertex spacings
+    similarity: its scale² is the share of the model's area the piece stands for
     """
 
     covered: float
-    scale: float
     residual: float
-    rotation: np.ndarray
-    translation: np.ndarray
+    similarity: Similarity
 
     @property
     def share(self) -> float:
-        return self.scale * self.scale
+        return self.similarity.scale ** 2
 
     @property
     def lies_on(self) -> bool:
@@ -85,10 +83,10 @@ class PieceFit:
         return self.covered >= COVERED and SHARE[0] <= self.share <= SHARE[1]
 
 
-def spacing(vertices: np.ndarray) -> float:
-    """The mean edge of a triangulation of `vertices` (n, 3) spread evenly over unit area:
-    sqrt(2 / (√3 n)), the yardstick of the screen (a fit measures the real one)."""
-    return float(np.sqrt(2.0 / (np.sqrt(3.0) * max(len(vertices), 1))))
+def spacing(n: int) -> float:
+    """The mean edge of a triangulation of n vertices spread evenly over unit area: sqrt(2 / (√3 n)),
+    the yardstick of the screen (a fit measures the real one)."""
+    return float(np.sqrt(2.0 / (np.sqrt(3.0) * max(n, 1))))
 
 
 def points(signature: LocalSignature) -> np.ndarray | None:
@@ -96,11 +94,6 @@ def points(signature: LocalSignature) -> np.ndarray | None:
     if signature.surface is None or signature.vertex is None:
         return None
     return signature.surface[signature.vertex].astype(np.float64)
-
-
-def _surface(signature: LocalSignature) -> np.ndarray:
-    """(n, 3) the surface's vertices (an empty array when it has none)."""
-    return np.zeros((0, 3)) if signature.surface is None else signature.surface
 
 
 def screens(query: LocalSignature, models: Sequence[LocalSignature], found: Sequence[PartialMatch],
@@ -120,7 +113,7 @@ def screens(query: LocalSignature, models: Sequence[LocalSignature], found: Sequ
             continue
         model = models[usable[j]]
         mpoints = points(model)
-        assert mpoints is not None
+        assert mpoints is not None and model.surface is not None
         nearest = np.argmin(d, axis=1)
         src, dst = qpoints[rows], mpoints[cols[nearest]]  # (p', 3) each
         # the hypotheses are drawn from the pairs whose slopes agree best: more of them are right
@@ -130,7 +123,7 @@ def screens(query: LocalSignature, models: Sequence[LocalSignature], found: Sequ
         rotation, scale, shift = umeyama_batch(src[pick], dst[pick], mirrored, True)
         allowed = (scale * scale >= SHARE[0]) & (scale * scale <= SHARE[1])
         moved = scale[:, None, None] * src[None] @ rotation.transpose(0, 2, 1) + shift[:, None]  # (h, p', 3)
-        agree = (np.linalg.norm(moved - dst[None], axis=2) < INLIER * spacing(_surface(model))).sum(axis=1)
+        agree = (np.linalg.norm(moved - dst[None], axis=2) < INLIER * spacing(len(model.surface))).sum(axis=1)
         agree = np.where(allowed, agree, 0)
         best = np.argsort(-agree, kind="stable")[:STARTS]
         starts = tuple(Similarity(float(scale[b]), rotation[b], shift[b]) for b in best if agree[b] > 0)
@@ -150,11 +143,9 @@ def fit(query: LocalSignature, model: LocalSignature, screen: Screen) -> PieceFi
     fits, costs = icp_batch(qpoints, tree, target, list(screen.starts), ROUNDS, with_scale=True)
     best: PieceFit | None = None
     for f, cost in zip(fits, costs, strict=True):
-        moved = f.scale * qpoints @ f.rotation.T + f.translation
-        near = tree.query(moved)[0]
-        got = PieceFit(covered=float((near < COVER * gap).mean()), scale=f.scale,
-                       residual=float(cost) / gap if gap > 0 else float("inf"),
-                       rotation=f.rotation, translation=f.translation)
+        near = tree.query(f.apply(qpoints))[0]
+        got = PieceFit(covered=float((near < COVER * gap).mean()),
+                       residual=float(cost) / gap if gap > 0 else float("inf"), similarity=f)
         if best is None or (got.lies_on, got.covered) > (best.lies_on, best.covered):
             best = got
     return best

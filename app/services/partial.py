@@ -70,14 +70,12 @@ class Work:
     coarse pass: a whole query, or a collection no larger than GLOBAL_KEEP); scored / scored_of: the
     candidates reached by the full scoring of those chosen (a model without a local signature counts as
     reached: it has no score to compute). Fewer read than asked: COARSE_BUDGET_S (SCORE_BUDGET_S) cut it.
-    fitted: the candidates the piece was fitted onto (app.core.piece_fit; FIT_BUDGET_S may cut them).
     seconds: per step (coarse, score, vote, peers, fit, regions; search.py adds the hit records)."""
 
     coarse_read: int = 0
     coarse_of: int = 0
     scored: int = 0
     scored_of: int = 0
-    fitted: int = 0
     seconds: dict[str, float] = field(default_factory=dict)
 
     @property
@@ -253,7 +251,6 @@ def ordered(ctx: ServiceContext, vocabulary_id: int | None, model_ids: Sequence[
         lead = piece_fit.leading([m.fit if m is not None else None for m in out])
         if work is not None:
             work.seconds["fit"] = time.perf_counter() - t
-            work.fitted = sum(m is not None and m.fit is not None for m in out)
     return piece_rank.by_score(out, vectors, lead=lead), out
 
 

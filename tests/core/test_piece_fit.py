@@ -71,7 +71,7 @@ def test_a_piece_moved_rescaled_or_mirrored_lies_on_the_model_it_was_cut_from(bo
     assert got is not None and got.lies_on, got
     # each surface at unit area: scale² is the share of the whole's area the piece is
     assert got.share == pytest.approx(half.area / bodies["whole"].area, abs=0.12)
-    assert (np.linalg.det(got.rotation) < 0) == mirror
+    assert got.similarity.mirrored == mirror
     assert got.residual < 1.0  # in vertex spacings: the piece's samples sit on the whole's surface
 
 
@@ -91,11 +91,12 @@ def test_no_surface_no_fit(bodies):
 
 def test_a_fit_that_shrinks_the_piece_onto_a_corner_shows_nothing():
     """A piece standing for a share of the model outside SHARE never lies on it, however covered."""
-    small = piece_fit.PieceFit(covered=1.0, scale=0.3, residual=0.0, rotation=np.eye(3),
-                               translation=np.zeros(3))
-    large = replace(small, scale=1.2)
-    fits = [small, replace(small, scale=0.8, covered=0.9), large, replace(small, scale=0.9, covered=0.79),
-            None, replace(small, scale=0.7, covered=0.95)]
+    def at(scale: float, covered: float = 1.0) -> piece_fit.PieceFit:
+        return piece_fit.PieceFit(covered=covered, residual=0.0,
+                                  similarity=piece_fit.Similarity(scale, np.eye(3), np.zeros(3)))
+
+    small, large = at(0.3), at(1.2)
+    fits = [small, at(0.8, 0.9), large, at(0.9, 0.79), None, at(0.7, 0.95)]
     assert not small.lies_on and not large.lies_on
     assert piece_fit.leading(fits) == [5, 1]  # those that lie on their model, the most covered first
 

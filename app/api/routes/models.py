@@ -5,7 +5,6 @@ from __future__ import annotations
 import mimetypes
 from typing import Annotated, Literal
 
-import numpy as np
 from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, JSONResponse
@@ -197,7 +196,7 @@ def _fit(fit: PieceFit | None) -> PieceFitPublic | None:
     if fit is None:
         return None
     return PieceFitPublic(lies_on=fit.lies_on, covered=round(fit.covered, 4), share=round(fit.share, 4),
-                          mirrored=bool(np.linalg.det(fit.rotation) < 0))
+                          mirrored=fit.similarity.mirrored)
 
 
 def to_response(
