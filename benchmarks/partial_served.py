@@ -227,8 +227,14 @@ def run_set(name: str, qdir: Path, served: Served, labels: np.ndarray, mnames: l
         for h in hits:
             if h.forward is not None and int(h.model.id) != own_j:
                 (fwd_same if labels[h.model.id] == r.label else fwd_other).append(h.forward)
+        src_hit = next((h for h in hits if int(h.model.id) == own_j), None)
         record: dict[str, Any] = {"file": qname, "label": r.label, "kept": kept[qname],
-                                  "ap": res["s_ap"][-1], "first": str(ranked[0])}
+                                  "ap": res["s_ap"][-1], "first": str(ranked[0]),
+                                  # where the piece's own source stood: a candidate? fitted? covered?
+                                  "source": {"candidate": src_hit is not None,
+                                             "fitted": src_hit is not None and src_hit.fit is not None,
+                                             "covered": None if src_hit is None or src_hit.fit is None
+                                             else round(src_hit.fit.covered, 3)}}
         for key, head in served.alternatives().items():
             alt = labels[full_ranking(head, order)]
             value = (100 * average_precision(alt, r.label, total), float(alt[0] == r.label))
