@@ -2,7 +2,7 @@
 
     python -m benchmarks.partial_served SRC NAME=FOLDER... [--per-class 4] [--split held|pick]
            [--cache-dir .cache/describe] [--workers 1] [--ideas] [--json var/served.json]
-           [--level W] [--peer-radius R]
+           [--level W] [--peer-radius R] [--fit-budget SECONDS]
 
 SRC is the labelled folder of whole models (e.g. `shrec11-simplified`), each NAME=FOLDER a set of pieces
 written by benchmarks.partial (labels.csv and partial.csv), e.g. `1cut-60-85=var/p6085`. From each set,
@@ -14,8 +14,9 @@ cache (resumable: an interrupted run keeps what it described), encoded with the 
 code for a piece (app.services.search._scored: app.services.partial's candidates, their score with
 the vote, averaged with their nearest fellow candidates', the order), the local signatures and the stored
 vectors served from memory instead of the blob store and the database, and
-the two deadlines lifted (their wall time is printed instead: a loaded machine would otherwise score
-fewer candidates and make the figures depend on the load). The models that are not candidates follow
+the deadlines lifted (their wall time is printed instead: a loaded machine would otherwise score
+fewer candidates and make the figures depend on the load); `--fit-budget` puts the fits' back, to see
+what the service's deadline costs on this host. The models that are not candidates follow
 in their global order, so mAP reads the whole ranking.
 
 Prints per set: mAP and NN of the global ranking and of the served one, the share of pieces with a
@@ -91,6 +92,7 @@ class Served:
     vectors: np.ndarray
     signatures: list[LocalSignature | None]
     seconds: list[float] = field(default_factory=list)  # the partial stage's wall time per piece
+    fit_budget_s: float = float("inf")  # the fits' deadline (the service's: partial.FIT_BUDGET_S)
     last: tuple[np.ndarray, list[Any]] = (np.zeros(0, np.int64), [])  # the last piece's candidates, matches
 
     def global_order(self, vector: np.ndarray, leave_out: int | None = None) -> np.ndarray:
@@ -121,7 +123,7 @@ class Served:
                 mock.patch.object(partial_mod, "stored_vectors", lambda ctx, vid, ids: vectors[list(ids)]), \
                 mock.patch.object(partial_mod, "COARSE_BUDGET_S", float("inf")), \
                 mock.patch.object(partial_mod, "SCORE_BUDGET_S", float("inf")), \
-                mock.patch.object(partial_mod, "FIT_BUDGET_S", float("inf")), \
+                mock.patch.object(partial_mod, "FIT_BUDGET_S", self.fit_budget_s), \
                 mock.patch.object(partial_mod, "MUTUAL", 1.0), mock.patch.object(partial_mod, "score", keep):
             t = time.perf_counter()
             out = search_mod._scored(None, description.local, hits,  # type: ignore[arg-type]
@@ -353,6 +355,8 @@ def main(argv: list[str] | None = None) -> int:
                    help=f"the level's weight in a sample pair's distance (served: {partial_match.LEVEL})")
     p.add_argument("--peer-radius", type=float, default=None,
                    help=f"only candidates this near are peers (served: {piece_rank.PEER_RADIUS})")
+    p.add_argument("--fit-budget", type=float, default=float("inf"),
+                   help=f"the fits' deadline in seconds (default: none; served: {partial_mod.FIT_BUDGET_S})")
     a = p.parse_args(argv)
     if a.level is not None:  # match_many reads the module's weight at each call
         partial_match.LEVEL = a.level
@@ -363,7 +367,8 @@ def main(argv: list[str] | None = None) -> int:
     rows = read_labelled_folder(src)
     descs = described(rows, a.cache_dir, a.workers, src.name)
     vocab = Vocabulary.load(VOCABULARY)
-    served = Served(np.stack([vocab.encode(d) for d in descs]).astype(np.float64), [d.local for d in descs])
+    served = Served(np.stack([vocab.encode(d) for d in descs]).astype(np.float64), [d.local for d in descs],
+                    fit_budget_s=a.fit_budget)
     labels = np.array([r.label for r in rows])
     mnames = [r.path.relative_to(src.resolve()).as_posix() for r in rows]
     print(f"{len(rows)} models ({src.name}), {len(set(labels))} classes; {a.per_class} pieces a class a set, "
