@@ -122,11 +122,12 @@ def screens(query: LocalSignature, models: Sequence[LocalSignature], found: Sequ
         assert mpoints is not None and model.surface is not None
         nearest = np.argmin(d, axis=1)
         src, dst = qpoints[rows], mpoints[cols[nearest]]  # (p', 3) each
-        pick = _triples(src, dst, rng, INLIER * spacing(len(model.surface)))
+        tolerance = INLIER * spacing(len(model.surface))
+        pick = _triples(src, dst, rng, tolerance)
         rotation, scale, shift = umeyama_batch(src[pick], dst[pick], mirrored, True)
         allowed = (scale * scale >= SHARE[0]) & (scale * scale <= SHARE[1])
         moved = scale[:, None, None] * src[None] @ rotation.transpose(0, 2, 1) + shift[:, None]  # (h, p', 3)
-        agree = (np.linalg.norm(moved - dst[None], axis=2) < INLIER * spacing(len(model.surface))).sum(axis=1)
+        agree = (np.linalg.norm(moved - dst[None], axis=2) < tolerance).sum(axis=1)
         agree = np.where(allowed, agree, 0)
         best = np.argsort(-agree, kind="stable")[:STARTS]
         starts = tuple(Similarity(float(scale[b]), rotation[b], shift[b]) for b in best if agree[b] > 0)
@@ -164,14 +165,11 @@ def fit(query: LocalSignature, model: LocalSignature, screen: Screen) -> PieceFi
     target = model.surface.astype(np.float64)
     tree = cKDTree(target)
     gap = float(np.median(tree.query(target, k=2)[0][:, 1]))  # the model's own vertex spacing
-    fits, costs = icp_batch(qpoints, tree, target, list(screen.starts), EARLY, with_scale=True)
-    if len(fits) > KEEP:  # the starts that cover most after EARLY rounds go on (a third of the cost)
-        covers = [(tree.query(f.apply(qpoints))[0] < COVER * gap).mean() for f in fits]
-        going = np.argsort(-np.array(covers), kind="stable")[:KEEP]
-        fits, costs = icp_batch(qpoints, tree, target, [fits[i] for i in going], ROUNDS - EARLY,
-                                with_scale=True)
-    else:
-        fits, costs = icp_batch(qpoints, tree, target, fits, ROUNDS - EARLY, with_scale=True)
+    early, _ = icp_batch(qpoints, tree, target, list(screen.starts), EARLY, with_scale=True)
+    # the KEEP starts that cover most after EARLY rounds go on: a third of the cost of ROUNDS for all
+    covers = np.array([(tree.query(f.apply(qpoints))[0] < COVER * gap).mean() for f in early])
+    going = [early[i] for i in np.argsort(-covers, kind="stable")[:KEEP]]
+    fits, costs = icp_batch(qpoints, tree, target, going, ROUNDS - EARLY, with_scale=True)
     best: PieceFit | None = None
     for f, cost in zip(fits, costs, strict=True):
         near = tree.query(f.apply(qpoints))[0]
