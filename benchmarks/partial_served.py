@@ -236,7 +236,9 @@ def run_set(name: str, qdir: Path, served: Served, labels: np.ndarray, mnames: l
                                   "source": {"candidate": src_hit is not None,
                                              "fitted": src_hit is not None and src_hit.fit is not None,
                                              "covered": None if src_hit is None or src_hit.fit is None
-                                             else round(src_hit.fit.covered, 3)}}
+                                             else round(src_hit.fit.covered, 3)},
+                                  # the models of another class the piece was shown to lie on
+                                  "lies_on_other": [str(labels[j]) for j in lying if labels[j] != r.label]}
         for key, head in served.alternatives().items():
             alt = labels[full_ranking(head, order)]
             value = (100 * average_precision(alt, r.label, total), float(alt[0] == r.label))

@@ -257,8 +257,8 @@ def ordered(ctx: ServiceContext, vocabulary_id: int | None, model_ids: Sequence[
 
 def fitted(ctx: ServiceContext, query: LocalSignature, model_ids: Sequence[int],
            found: list[PartialMatch | None], budget_s: float) -> list[PartialMatch | None]:
-    """The matches with `fit` set for the candidates app.core.piece_fit chooses (the best screens and
-    the first by score), fitted best screen first until `budget_s` is spent (the first FIT_ALWAYS
+    """The matches with `fit` set for the candidates app.core.piece_fit chooses (those of most promise
+    and the first by score), fitted most promise first until `budget_s` is spent (the first FIT_ALWAYS
     always): each model's signature from the LRU the scoring filled."""
     sigs = [local_of(ctx, model_ids[j]) if m is not None else None for j, m in enumerate(found)]
     fits = piece_fit.fitted(query, sigs, found, LOCAL, time.monotonic() + budget_s, FIT_ALWAYS)

@@ -101,13 +101,35 @@ def test_a_fit_that_shrinks_the_piece_onto_a_corner_shows_nothing():
     assert piece_fit.leading(fits) == [5, 1]  # those that lie on their model, the most covered first
 
 
-def test_the_candidates_fitted_are_the_best_screens_and_the_first_by_score(monkeypatch):
+def test_the_check_puts_the_piece_on_its_model_and_on_no_other(bodies, random_rotation):
+    """Two ICP rounds of 64 of the piece's samples from the screen's starts: on the model it was cut
+    from (moved, rescaled, mirrored) most of them lie on its surface, and that model is the most
+    promising of the bodies; on the others far fewer do."""
+    piece = _describe(_moved(bodies["half"], random_rotation(3), 0.04, True))
+    names = list(bodies["shapes"])
+    models = [bodies["shapes"][n] for n in names]
+    got = dict(zip(names, piece_fit.screens(piece, models, match_many(piece, models, LOCAL), LOCAL),
+                   strict=True))
+    own = got.pop("quadruped")
+    assert own is not None and own.checked >= 0.8, own
+    others = [s for s in got.values() if s is not None]
+    assert others and max(s.checked for s in others) < own.checked - 0.2, got
+    assert all(s.promise < own.promise for s in others)
+
+
+def test_a_check_with_no_start_is_zero():
+    assert piece_fit._check(np.zeros((5, 3)), np.eye(3), ()) == 0.0
+
+
+def test_the_candidates_fitted_are_those_of_most_promise_and_the_first_by_score(monkeypatch):
     monkeypatch.setattr(piece_fit, "BY_SCREEN", 2)
     monkeypatch.setattr(piece_fit, "BY_SCORE", 2)
     start = (piece_fit.Similarity(1.0, np.eye(3), np.zeros(3)),)
-    screened = [piece_fit.Screen(s, start) for s in (0.1, 0.5, 0.2, 0.9)] + [None, piece_fit.Screen(0.8, ())]
-    # by score: 5 (no start: never fitted), 4 (no screen), 0, 2, 1, 3
-    assert piece_fit.to_fit(screened, [5, 4, 0, 2, 1, 3]) == [3, 1, 0, 2]
+    # promise: the check and half the inliers; 0.5, 0.45, 0.6, 0.3
+    screened = [piece_fit.Screen(i, start, c) for i, c in ((0.2, 0.4), (0.9, 0.0), (0.4, 0.4), (0.2, 0.2))]
+    screened += [None, piece_fit.Screen(0.8, (), 1.0)]
+    # by score: 5 (no start: never fitted), 4 (no screen), 3, 1, 0, 2
+    assert piece_fit.to_fit(screened, [5, 4, 3, 1, 0, 2]) == [2, 0, 3, 1]
 
 
 def _own(own: float) -> PartialMatch:
