@@ -54,21 +54,25 @@ def _post(client: httpx.Client, path: Path) -> tuple[float, dict[str, Any]]:
 def _summary(name: str, walls: list[float], bodies: list[dict[str, Any]]) -> dict[str, Any]:
     w = np.array(walls)
     split = {key: float(np.median([b.get("seconds", {}).get(key, np.nan) for b in bodies]))
-             for key in ("describe", "encode", "search", "partial", "partial.coarse", "partial.score")}
+             for key in ("describe", "encode", "search", "partial", "partial.coarse", "partial.score",
+                         "partial.fit")}
     out = {"kind": name, "queries": len(w), "p50_s": float(np.percentile(w, 50)),
            "p95_s": float(np.percentile(w, 95)), "max_s": float(w.max()), "server_p50_s": split,
            "partial_hits": int(sum(bool(b["data"]) and bool(b["data"][0].get("partial")) for b in bodies))}
     work = [b["partial"] for b in bodies if b.get("partial")]
     out["coarse_cut"] = sum(w["coarse_cut"] for w in work)
     out["score_cut"] = sum(w["score_cut"] for w in work)
+    out["fit_cut"] = sum(w.get("fit_cut", False) for w in work)
     print(f"  {name:6s} n {len(w):3d}  wall p50 {out['p50_s']:.3f} s  p95 {out['p95_s']:.3f} s  max "
           f"{out['max_s']:.3f} s;  server p50: " + ", ".join(f"{k} {v:.3f}" for k, v in split.items())
           + f";  answered as pieces {out['partial_hits']};  coarse pass cut {out['coarse_cut']}, scoring cut "
-          f"{out['score_cut']} (of {len(work)} reporting)")
+          f"{out['score_cut']}, fits cut {out['fit_cut']} (of {len(work)} reporting)")
     if work:
         read, scored = np.median([x["coarse_read"] for x in work]), np.median([x["scored"] for x in work])
         print(f"         coarse read p50 {read:.0f} of {max(x['coarse_of'] for x in work)}; scored p50 "
-              f"{scored:.0f} of {np.median([x['scored_of'] for x in work]):.0f}")
+              f"{scored:.0f} of {np.median([x['scored_of'] for x in work]):.0f}; fitted p50 "
+              f"{np.median([x.get('fitted', 0) for x in work]):.0f} of "
+              f"{np.median([x.get('fitted_of', 0) for x in work]):.0f}")
     return out
 
 
@@ -93,7 +97,7 @@ def _agreement(pieces: list[LabelledFile], bodies: list[dict[str, Any]], src: Pa
         same += offline == http
         first += offline[:1] == http[:1]
         work = body.get("partial") or {}
-        cut = bool(work.get("coarse_cut") or work.get("score_cut"))
+        cut = bool(work.get("coarse_cut") or work.get("score_cut") or work.get("fit_cut"))
         table[(offline == http, cut)] = table.get((offline == http, cut), 0) + 1
         if offline != http or cut:
             moved = sum(a != b for a, b in zip(offline, http, strict=False))

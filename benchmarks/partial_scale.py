@@ -14,7 +14,9 @@ FAISS flat L1 index):
 - N - 600 synthetic models, each made from a real one, a: its global vector (1 - w)·v_a + w·v_b
   (b another real model, w uniform in [0, 0.3]) with each entry times exp(N(0, 0.1²)), and a's local
   signature with N(0, 0.03²) added to every slope (the match tolerance is 2·10⁻³ in mean squared slope:
-  a copy still matches its source closely, and the coarse pass and the scoring do a real match each).
+  a copy still matches its source closely, and the coarse pass and the scoring do a real match each)
+  and a's surface (so a copy is screened and fitted as a real model is, and a piece lies on copies of
+  its source).
   Only what a search reads of a description is stored for them (the local signature's members and
   the input noise, as ShapeDescription.save writes them, compressed): the HKS table, weights, keypoints
   and eigenvalues (what a vocabulary rebuild, the explain view and the variant check read) are left out,
@@ -23,14 +25,14 @@ Then `--pieces` one-cut pieces of QUERIES (one a class, outside the picking spli
 benchmarks.partial_http samples them; their descriptions from the same cache) go through
 app.services.search.search_description (k = 10, partial detection automatic), one at a time, after one
 warm-up query, and `--wholes` whole models of SRC as well. Printed per size: p50 / p95 of each stage
-(global search, hit records, coarse pass, full scoring, vote, regions) and of the whole call, the work
-the deadlines left (models the coarse pass read of those it was to read, candidates scored of those
-chosen, how often each was cut), the same pieces again with both deadlines lifted (their stage times,
-and whether the served top 10 and first hit are the lifted ones), what one model of the coarse pass
-costs (reading its signature without the LRU, and its coarse match; 5 pieces), the index and
-descriptions on disk,
-the index in memory, and the ratios against the first size, measured in the same process. The query
-describe (about 0.4 s through HTTP, docs/partial.md) is not part of these times.
+(global search, hit records, coarse pass, full scoring, vote, peers, fits, regions) and of the whole
+call, the work the deadlines left (models the coarse pass read of those it was to read, candidates
+scored of those chosen, fits made of those chosen, how often each was cut), the same pieces again with
+the three deadlines lifted (their stage times, and whether the served top 10 and first hit are the
+lifted ones), what one model of the coarse pass costs (reading its signature without the LRU, and its
+coarse match; 5 pieces), the index and descriptions on disk, the index in memory, and the ratios
+against the first size, measured in the same process. The query describe (about 0.4 s through HTTP,
+docs/partial.md) is not part of these times.
 The LRU of local signatures starts empty at each size; the descriptions written a moment before are
 in the OS page cache (a cold read here parses an npz from memory, not from disk).
 """
@@ -59,7 +61,8 @@ from app.services.context import ServiceContext
 from benchmarks.partial_served import described, sample
 from benchmarks.partial_spectra import _folder
 
-STAGES = ("search", "partial.records", "partial.coarse", "partial.score", "partial.vote", "partial.regions")
+STAGES = ("search", "partial.records", "partial.coarse", "partial.score", "partial.vote", "partial.peers",
+          "partial.fit", "partial.regions")
 SLOPE_JITTER = 0.03  # per slope (and on the level), added to a synthetic model's copy of a real signature
 VECTOR_JITTER = 0.1  # log-normal, per entry of a synthetic model's global vector
 MAX_MIX = 0.3  # a synthetic vector's weight of a second real model
@@ -145,9 +148,10 @@ def store_synthetic(ctx: ServiceContext, rows: Sequence[LabelledFile], descs: Se
                 slopes = src.local.slopes + rng.normal(0.0, SLOPE_JITTER, src.local.slopes.shape)
                 level = None if src.local.level is None else (
                     src.local.level + rng.normal(0.0, SLOPE_JITTER, src.local.level.shape)).astype(np.float32)
+                # the source's surface too: a copy is screened and fitted as a real model is
                 sig = LocalSignature(slopes=slopes.astype(np.float32), area=src.local.area,
                                      valid=src.local.valid, rim=src.local.rim, vertex=src.local.vertex,
-                                     level=level)
+                                     level=level, surface=src.local.surface)
                 _save_signature(ctx.blobs.description_path(mid), sig, src.input_noise)
                 vocab_repo.put_vector(conn, mid, vid, vectors[i].astype(np.float32))
                 models_repo.set_ready(conn, mid, src.input_vertices)
@@ -166,7 +170,8 @@ def _queries(ctx: ServiceContext, live: Any, descs: Sequence[ShapeDescription],
              lifted: bool = False) -> list[dict[str, Any]]:
     """search_description of each description, one at a time: its stage seconds, work, top 10."""
     out = []
-    budgets = ({"COARSE_BUDGET_S": float("inf"), "SCORE_BUDGET_S": float("inf")} if lifted else {})
+    budgets = ({"COARSE_BUDGET_S": float("inf"), "SCORE_BUDGET_S": float("inf"), "FIT_BUDGET_S": float("inf")}
+               if lifted else {})
     with mock.patch.multiple(partial_mod, **budgets) if budgets else contextlib.nullcontext():
         for d in descs:
             t = time.perf_counter()
@@ -178,7 +183,9 @@ def _queries(ctx: ServiceContext, live: Any, descs: Sequence[ShapeDescription],
                 "labels": [h.model.label for h in result.hits],
                 "work": None if w is None else {"coarse_read": w.coarse_read, "coarse_of": w.coarse_of,
                                                 "scored": w.scored, "scored_of": w.scored_of,
-                                                "coarse_cut": w.coarse_cut, "score_cut": w.score_cut},
+                                                "coarse_cut": w.coarse_cut, "score_cut": w.score_cut,
+                                                "fitted": w.fitted, "fitted_of": w.fitted_of,
+                                                "fit_cut": w.fit_cut},
             })
     return out
 
@@ -266,6 +273,8 @@ def measure(size: int, work_dir: Path, rows: Sequence[LabelledFile], descs: Sequ
         "coarse_read": [w["coarse_read"] for w in works], "coarse_of": [w["coarse_of"] for w in works],
         "scored": [w["scored"] for w in works], "scored_of": [w["scored_of"] for w in works],
         "coarse_cut": sum(w["coarse_cut"] for w in works), "score_cut": sum(w["score_cut"] for w in works),
+        "fitted": [w["fitted"] for w in works], "fitted_of": [w["fitted_of"] for w in works],
+        "fit_cut": sum(w["fit_cut"] for w in works),
         "whole_score_cut": sum(r["work"]["score_cut"] for r in whole if r["work"]),
         "same_top10_as_lifted": sum(a["top"] == b["top"] for a, b in pairs),
         "same_first_as_lifted": sum(a["top"][:1] == b["top"][:1] for a, b in pairs),
@@ -304,7 +313,10 @@ def _print(r: dict[str, Any]) -> None:
     print(f"  pieces: coarse read {int(np.median(r['coarse_read']))} (min {min(r['coarse_read'])}) of "
           f"{max(r['coarse_of'])}, cut {r['coarse_cut']}/{len(r['coarse_read'])};  scored "
           f"{int(np.median(r['scored']))} (min {min(r['scored'])}) of {int(np.median(r['scored_of']))}, cut "
-          f"{r['score_cut']}/{len(r['scored'])};  top 10 = lifted for {r['same_top10_as_lifted']}, first "
+          f"{r['score_cut']}/{len(r['scored'])};  fitted {int(np.median(r['fitted']))} "
+          f"(min {min(r['fitted'])}) of {int(np.median(r['fitted_of']))}, "
+          f"cut {r['fit_cut']}/{len(r['fitted'])};  "
+          f"top 10 = lifted for {r['same_top10_as_lifted']}, first "
           f"{r['same_first_as_lifted']};  NN served {r['nn_served']:.3f} lifted {r['nn_lifted']:.3f} "
           f"(synthetic copies carry their source's label); first hit a real model {r['first_real_served']}; "
           f"whole queries' scoring cut {r['whole_score_cut']}")
@@ -350,7 +362,8 @@ def main(argv: list[str] | None = None) -> int:
     pieces = described(chosen, a.cache_dir, 1, "pieces")
     wholes = sample(rows, 1, "held")[: a.wholes]
     print(f"{len(pieces)} pieces of {qdir.name}, {len(wholes)} whole models; sizes {sizes}; "
-          f"deadlines: coarse {partial_mod.COARSE_BUDGET_S} s, scoring {partial_mod.SCORE_BUDGET_S} s; "
+          f"deadlines: coarse {partial_mod.COARSE_BUDGET_S} s, scoring {partial_mod.SCORE_BUDGET_S} s, "
+          f"fits {partial_mod.FIT_BUDGET_S} s; "
           f"coarse scan {partial_mod.COARSE_SCAN}, candidates {partial_mod.RERANK}")
     results = [measure(n, a.work, rows, descs, pieces, [r.label for r in chosen], wholes, a.keep)
                for n in sizes]

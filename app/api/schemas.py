@@ -285,6 +285,12 @@ class PartialWork(BaseModel):
         description="true when its deadline left candidates unscored: they follow the scored ones in their"
         " global order, and the vote counted among fewer"
     )
+    fitted: int = Field(0, description="candidates a piece was fitted onto (a similarity fit that shows"
+                        " it lies on the model: the hit's `fit`); 0 for a whole query")
+    fitted_of: int = Field(0, description="candidates chosen to be fitted (the most promising screens and"
+                           " the best scores)")
+    fit_cut: bool = Field(False, description="true when the fits' deadline left candidates unscreened or"
+                          " chosen ones unfitted: those get no `fit`")
 
 
 class SearchResponse(BaseModel):

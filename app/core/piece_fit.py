@@ -222,18 +222,39 @@ def to_fit(screened: Sequence[Screen | None], by_score: Sequence[int]) -> list[i
     return list(dict.fromkeys(ranked[:BY_SCREEN] + first))
 
 
+@dataclass(frozen=True)
+class Fitted:
+    """What fitted() did: one fit (None: not fitted) per candidate, and how far it got.
+
+    screened / screen_of: candidates screened, of those with a signature and a score (fewer: the
+    deadline stopped the screens); made / chosen: fits made, of the candidates to_fit chose."""
+
+    fits: list[PieceFit | None]
+    screened: int = 0
+    screen_of: int = 0
+    made: int = 0
+    chosen: int = 0
+
+    @property
+    def cut(self) -> bool:
+        """Whether the deadline left candidates unscreened or chosen ones unfitted."""
+        return self.screened < self.screen_of or self.made < self.chosen
+
+
 def fitted(query: LocalSignature, models: Sequence[LocalSignature | None],
            found: Sequence[PartialMatch | None], params: LocalParams, deadline: float | None = None,
-           always: int = 4) -> list[PieceFit | None]:
-    """One fit (None: not fitted) per candidate: models (their signatures, None: unknown) and found (their
-    matches, None: unscored) align. The candidates to_fit chooses, by their scores' order, fitted most
-    promise first; past `deadline` (time.monotonic(); None: none) only the first `always`."""
+           always: int = 4) -> Fitted:
+    """The fits, one per candidate: models (their signatures, None: unknown) and found (their matches,
+    None: unscored) align. The candidates are screened best score first (CHUNK at a time), and those
+    to_fit chooses are fitted most promise first; past `deadline` (time.monotonic(); None: none) no
+    more screens, and no more fits once the first `always` are made."""
     out: list[PieceFit | None] = [None] * len(found)
     have = [j for j, (m, s) in enumerate(zip(found, models, strict=True)) if m is not None and s is not None]
     sigs = [models[j] for j in have]
     matches = [found[j] for j in have]
     by_score = sorted(range(len(have)), key=lambda i: (matches[i].score, have[i]))  # type: ignore[union-attr]
     screened: list[Screen | None] = [None] * len(have)
+    reached = 0
     for start in range(0, len(by_score), CHUNK):  # best scores first: a deadline cuts the likeliest last
         if start and deadline is not None and time.monotonic() > deadline:
             break
@@ -242,13 +263,17 @@ def fitted(query: LocalSignature, models: Sequence[LocalSignature | None],
                       seed=start)
         for i, screen in zip(part, got, strict=True):
             screened[i] = screen
-    for n, i in enumerate(to_fit(screened, by_score)):
-        if deadline is not None and n >= always and time.monotonic() > deadline:
+        reached += len(part)
+    chosen = to_fit(screened, by_score)
+    made = 0
+    for i in chosen:
+        if deadline is not None and made >= always and time.monotonic() > deadline:
             break
         screen, model = screened[i], sigs[i]
         assert screen is not None and model is not None
         out[have[i]] = fit(query, model, screen)
-    return out
+        made += 1
+    return Fitted(out, reached, len(have), made, len(chosen))
 
 
 def leading(fits: Sequence[PieceFit | None]) -> list[int]:

@@ -192,6 +192,6 @@ def piece_order(query: LocalSignature, order: np.ndarray,
     held = None if vectors is None else np.asarray(vectors)[candidates]
     if held is not None:
         found = with_peers(found, held)
-    fits = piece_fit.fitted(query, [signature_of(int(i)) for i in candidates], found, params)
+    fits = piece_fit.fitted(query, [signature_of(int(i)) for i in candidates], found, params).fits
     ranked = candidates[by_score(found, held, lead=piece_fit.leading(fits))]
     return np.concatenate([ranked, order[~np.isin(order, ranked)]])

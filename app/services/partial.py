@@ -71,12 +71,17 @@ class Work:
     coarse pass: a whole query, or a collection no larger than GLOBAL_KEEP); scored / scored_of: the
     candidates reached by the full scoring of those chosen (a model without a local signature counts as
     reached: it has no score to compute). Fewer read than asked: COARSE_BUDGET_S (SCORE_BUDGET_S) cut it.
+    fitted / fitted_of: the fits made of those chosen (0 / 0: no fit: a whole query); fit_cut:
+    FIT_BUDGET_S stopped the screens or the fits (app.core.piece_fit.Fitted.cut).
     seconds: per step (coarse, score, vote, peers, fit, regions; search.py adds the hit records)."""
 
     coarse_read: int = 0
     coarse_of: int = 0
     scored: int = 0
     scored_of: int = 0
+    fitted: int = 0
+    fitted_of: int = 0
+    fit_cut: bool = False
     seconds: dict[str, float] = field(default_factory=dict)
 
     @property
@@ -248,22 +253,24 @@ def ordered(ctx: ServiceContext, vocabulary_id: int | None, model_ids: Sequence[
     lead: list[int] = []
     if query is not None:
         t = time.perf_counter()
-        out = fitted(ctx, query, model_ids, out, FIT_BUDGET_S)
+        out, done = fitted(ctx, query, model_ids, out, FIT_BUDGET_S)
         lead = piece_fit.leading([m.fit if m is not None else None for m in out])
         if work is not None:
+            work.fitted, work.fitted_of, work.fit_cut = done.made, done.chosen, done.cut
             work.seconds["fit"] = time.perf_counter() - t
     return piece_rank.by_score(out, vectors, lead=lead), out
 
 
 def fitted(ctx: ServiceContext, query: LocalSignature, model_ids: Sequence[int],
-           found: list[PartialMatch | None], budget_s: float) -> list[PartialMatch | None]:
-    """The matches with `fit` set for the candidates app.core.piece_fit chooses (those of most promise
-    and the first by score), fitted most promise first until `budget_s` is spent (the first FIT_ALWAYS
-    always): each model's signature from the LRU the scoring filled."""
+           found: list[PartialMatch | None],
+           budget_s: float) -> tuple[list[PartialMatch | None], piece_fit.Fitted]:
+    """(the matches with `fit` set, what the fits did): the candidates app.core.piece_fit chooses (those
+    of most promise and the first by score), fitted most promise first until `budget_s` is spent (the
+    first FIT_ALWAYS always): each model's signature from the LRU the scoring filled."""
     sigs = [local_of(ctx, model_ids[j]) if m is not None else None for j, m in enumerate(found)]
-    fits = piece_fit.fitted(query, sigs, found, LOCAL, time.monotonic() + budget_s, FIT_ALWAYS)
+    done = piece_fit.fitted(query, sigs, found, LOCAL, time.monotonic() + budget_s, FIT_ALWAYS)
     return [replace(m, fit=f) if m is not None and f is not None else m
-            for m, f in zip(found, fits, strict=True)]
+            for m, f in zip(found, done.fits, strict=True)], done
 
 
 def regions(ctx: ServiceContext, query: LocalSignature | None, model_ids: Sequence[int],

@@ -186,13 +186,17 @@ def test_a_small_collection_reports_every_candidate_matched_and_nothing_cut(part
     with TestClient(create_app(make_settings(data_dir, describe=DESCRIBE))) as client:
         piece = _search(client, _obj(_half(_shapes()["quadruped"])))
         whole = _search(client, _obj(_shapes()["torus"]))
+    fits = {k: piece["partial"].pop(k) for k in ("fitted", "fitted_of", "fit_cut")}
     assert piece["partial"] == {"coarse_read": 0, "coarse_of": 0, "coarse_cut": False,
                                 "scored": len(ids), "scored_of": len(ids), "score_cut": False}
-    assert {"partial.records", "partial.score", "partial.vote", "partial.peers",
+    # every candidate chosen to be fitted was (the quadruped the piece was cut from among them)
+    assert 1 <= fits["fitted"] == fits["fitted_of"] <= len(ids) and not fits["fit_cut"], fits
+    assert {"partial.records", "partial.score", "partial.vote", "partial.peers", "partial.fit",
             "partial.regions"} <= set(piece["seconds"])
     assert "partial.peers" not in whole["seconds"]  # a whole query's hits keep the global order
     assert whole["partial"] == {"coarse_read": 0, "coarse_of": 0, "coarse_cut": False,
-                                "scored": 5, "scored_of": 5, "score_cut": False}
+                                "scored": 5, "scored_of": 5, "score_cut": False,
+                                "fitted": 0, "fitted_of": 0, "fit_cut": False}
 
 
 def test_a_pieces_scores_meet_their_peers_through_the_stored_vectors(partial_dir, monkeypatch):

@@ -20,7 +20,8 @@ def _description(rng: np.random.Generator) -> ShapeDescription:
     local = LocalSignature(slopes=rng.normal(-0.6, 0.2, (40, 16)).astype(np.float32),
                            area=np.full(40, 1 / 40, np.float32), valid=np.full(40, 16, np.int16), rim=0.0,
                            vertex=np.arange(40, dtype=np.int32),
-                           level=rng.normal(-2.5, 0.3, 40).astype(np.float32))
+                           level=rng.normal(-2.5, 0.3, 40).astype(np.float32),
+                           surface=rng.normal(0.0, 0.3, (60, 3)).astype(np.float16))
     return ShapeDescription(hks=np.zeros((1, 1), np.float32), weights=np.ones(1, np.float32),
                             keypoints=np.zeros(1, bool), eigenvalues=np.zeros(2), input_vertices=500,
                             local=local, input_noise=0.25)
@@ -57,3 +58,6 @@ def test_synthetic_models_are_jittered_copies_the_search_path_reads(tmp_path, mo
         assert sig.level is not None and src.level is not None  # the level is read as the service reads it
         assert np.std(sig.level - src.level) == pytest.approx(partial_scale.SLOPE_JITTER, rel=0.35)
         assert partial_mod.noise_of(ctx, int(mid)) == pytest.approx(0.25)
+        # its source's surface: the fits screen and fit a copy as they do a real model
+        assert sig.surface is not None
+        np.testing.assert_array_equal(sig.surface, src.surface)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -130,6 +131,22 @@ def test_the_candidates_fitted_are_those_of_most_promise_and_the_first_by_score(
     screened += [None, piece_fit.Screen(0.8, (), 1.0)]
     # by score: 5 (no start: never fitted), 4 (no screen), 3, 1, 0, 2
     assert piece_fit.to_fit(screened, [5, 4, 3, 1, 0, 2]) == [2, 0, 3, 1]
+
+
+def test_past_the_deadline_the_fits_stop_after_the_first_and_say_so(bodies, monkeypatch):
+    """The screens stop at the first chunk past the deadline, the fits after the `always` first; the
+    Fitted says how far it got. With no deadline every candidate is screened and every chosen one
+    fitted."""
+    piece = _describe(bodies["half"])
+    models = list(bodies["shapes"].values())
+    found = match_many(piece, models, LOCAL)
+    whole = piece_fit.fitted(piece, models, found, LOCAL)
+    assert (whole.screened, whole.screen_of) == (len(models), len(models)) and not whole.cut
+    assert whole.made == whole.chosen == sum(f is not None for f in whole.fits) >= 1
+    monkeypatch.setattr(piece_fit, "CHUNK", 2)
+    late = piece_fit.fitted(piece, models, found, LOCAL, deadline=time.monotonic() - 1.0, always=1)
+    assert (late.screened, late.screen_of) == (2, len(models)) and late.cut
+    assert late.made == 1 == sum(f is not None for f in late.fits)
 
 
 def _own(own: float) -> PartialMatch:

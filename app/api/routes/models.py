@@ -220,6 +220,7 @@ def to_response(
     partial = None if work is None else PartialWork(
         coarse_read=work.coarse_read, coarse_of=work.coarse_of, coarse_cut=work.coarse_cut,
         scored=work.scored, scored_of=work.scored_of, score_cut=work.score_cut,
+        fitted=work.fitted, fitted_of=work.fitted_of, fit_cut=work.fit_cut,
     )
     return SearchResponse(
         data=hits, count=len(hits), vocabulary_id=result.vocabulary_id, seconds=result.seconds,
