@@ -20,6 +20,8 @@ Per candidate (both signatures must carry their `surface`):
    then the KEEP that cover most go on);
 4. covered: the share of the piece's samples within COVER model vertex spacings of a model vertex.
    A fit with covered >= COVERED (and its share in SHARE) shows the piece lies on the model.
+   A piece that lies on none of the models fitted gets a second look: the SECOND most promising are
+   screened again with other triples and fitted again.
 
 Coordinates are each surface's at unit area (the describe's), so scale² is the share of the model's
 area the piece stands for. Measured on SHREC'11's held-out pieces (docs/partial.md): fitted onto its
@@ -62,7 +64,11 @@ CHECK_INLIERS = 0.5  # the inlier share's weight in a candidate's promise (the c
 # pieces: the sources that pass are within these for 0.99 of the pieces, docs/partial.md)
 BY_SCREEN = 32
 BY_SCORE = 10
+# a piece that lies on none of them gives the SECOND most promising a second screen (other triples) and
+# fit: a fit fails from wrong starts, and another draw finds right ones for some (docs/partial.md)
+SECOND = 8
 CHUNK = 32  # candidates screened between two looks at the clock
+SECOND_SEED = 1_000_003  # the second screens' seeds: this plus the candidate's index, apart from the first's
 
 
 @dataclass(frozen=True)
@@ -227,13 +233,15 @@ class Fitted:
     """What fitted() did: one fit (None: not fitted) per candidate, and how far it got.
 
     screened / screen_of: candidates screened, of those with a signature and a score (fewer: the
-    deadline stopped the screens); made / chosen: fits made, of the candidates to_fit chose."""
+    deadline stopped the screens); made / chosen: fits made, of the candidates to_fit chose; again:
+    second screens and fits (a piece that lay on none)."""
 
     fits: list[PieceFit | None]
     screened: int = 0
     screen_of: int = 0
     made: int = 0
     chosen: int = 0
+    again: int = 0
 
     @property
     def cut(self) -> bool:
@@ -247,7 +255,9 @@ def fitted(query: LocalSignature, models: Sequence[LocalSignature | None],
     """The fits, one per candidate: models (their signatures, None: unknown) and found (their matches,
     None: unscored) align. The candidates are screened best score first (CHUNK at a time), and those
     to_fit chooses are fitted most promise first; past `deadline` (time.monotonic(); None: none) no
-    more screens, and no more fits once the first `always` are made."""
+    more screens, and no more fits once the first `always` are made. If the piece lies on none of
+    them, the SECOND most promising are screened again with other triples and fitted again (before
+    the deadline): a fit that passes replaces the first."""
     out: list[PieceFit | None] = [None] * len(found)
     have = [j for j, (m, s) in enumerate(zip(found, models, strict=True)) if m is not None and s is not None]
     sigs = [models[j] for j in have]
@@ -273,7 +283,19 @@ def fitted(query: LocalSignature, models: Sequence[LocalSignature | None],
         assert screen is not None and model is not None
         out[have[i]] = fit(query, model, screen)
         made += 1
-    return Fitted(out, reached, len(have), made, len(chosen))
+    again = 0
+    if not any(f is not None and f.lies_on for f in out):
+        for i in chosen[:min(made, SECOND)]:
+            if deadline is not None and time.monotonic() > deadline:
+                break
+            again += 1
+            model = sigs[i]
+            assert model is not None
+            (screen,) = screens(query, [model], [matches[i]], params, seed=SECOND_SEED + i)  # type: ignore[list-item]
+            redone = fit(query, model, screen) if screen is not None else None
+            if redone is not None and redone.lies_on:
+                out[have[i]] = redone
+    return Fitted(out, reached, len(have), made, len(chosen), again)
 
 
 def leading(fits: Sequence[PieceFit | None]) -> list[int]:

@@ -143,10 +143,39 @@ def test_past_the_deadline_the_fits_stop_after_the_first_and_say_so(bodies, monk
     whole = piece_fit.fitted(piece, models, found, LOCAL)
     assert (whole.screened, whole.screen_of) == (len(models), len(models)) and not whole.cut
     assert whole.made == whole.chosen == sum(f is not None for f in whole.fits) >= 1
+    assert whole.again == 0  # it lies on the quadruped: no second look
     monkeypatch.setattr(piece_fit, "CHUNK", 2)
     late = piece_fit.fitted(piece, models, found, LOCAL, deadline=time.monotonic() - 1.0, always=1)
     assert (late.screened, late.screen_of) == (2, len(models)) and late.cut
     assert late.made == 1 == sum(f is not None for f in late.fits)
+
+
+def test_a_piece_that_lies_on_nothing_gets_a_second_look(bodies, monkeypatch):
+    """When no first fit passes, the most promising candidates are screened again with other triples
+    and fitted again; a second fit that passes takes the first's place."""
+    piece = _describe(bodies["half"])
+    names = list(bodies["shapes"])
+    models = [bodies["shapes"][n] for n in names]
+    found = match_many(piece, models, LOCAL)
+    seeds: list[int] = []
+    real_screens, real_fit = piece_fit.screens, piece_fit.fit
+
+    def screens(*args, seed=0):
+        seeds.append(seed)
+        return real_screens(*args, seed=seed)
+
+    def fit(query, model, screen):  # every first fit fails: its starts were wrong
+        got = real_fit(query, model, screen)
+        second = seeds[-1] >= piece_fit.SECOND_SEED
+        return got if second or got is None else replace(got, covered=0.0)
+
+    monkeypatch.setattr(piece_fit, "screens", screens)
+    monkeypatch.setattr(piece_fit, "fit", fit)
+    done = piece_fit.fitted(piece, models, found, LOCAL)
+    assert 1 <= done.again <= min(done.made, piece_fit.SECOND)
+    assert [s for s in seeds if s >= piece_fit.SECOND_SEED], seeds  # other draws than the first
+    lying = [names[j] for j in piece_fit.leading(done.fits)]
+    assert lying[:1] == ["quadruped"], lying
 
 
 def _own(own: float) -> PartialMatch:
