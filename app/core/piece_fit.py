@@ -170,8 +170,12 @@ def _check(sample: np.ndarray, surface: np.ndarray, starts: tuple[Similarity, ..
     target = surface.astype(np.float64)
     tree = cKDTree(target)
     moved, _ = icp_batch(sample, tree, target, list(starts), CHECK_ROUNDS, with_scale=True)
-    near = COVER * spacing(len(target))
-    return max(float((tree.query(f.apply(sample))[0] < near).mean()) for f in moved)
+    return max(_covered(tree, sample, f, COVER * spacing(len(target))) for f in moved)
+
+
+def _covered(tree: cKDTree, points: np.ndarray, similarity: Similarity, near: float) -> float:
+    """The share of points (p, 3), moved by the similarity, within `near` of the tree's points."""
+    return float((tree.query(similarity.apply(points))[0] < near).mean())
 
 
 def _triples(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, tolerance: float) -> np.ndarray:
@@ -206,13 +210,12 @@ def fit(query: LocalSignature, model: LocalSignature, screen: Screen) -> PieceFi
     gap = float(np.median(tree.query(target, k=2)[0][:, 1]))  # the model's own vertex spacing
     early, _ = icp_batch(qpoints, tree, target, list(screen.starts), EARLY, with_scale=True)
     # the KEEP starts that cover most after EARLY rounds go on: a third of the cost of ROUNDS for all
-    covers = np.array([(tree.query(f.apply(qpoints))[0] < COVER * gap).mean() for f in early])
+    covers = np.array([_covered(tree, qpoints, f, COVER * gap) for f in early])
     going = [early[i] for i in np.argsort(-covers, kind="stable")[:KEEP]]
     fits, costs = icp_batch(qpoints, tree, target, going, ROUNDS - EARLY, with_scale=True)
     best: PieceFit | None = None
     for f, cost in zip(fits, costs, strict=True):
-        near = tree.query(f.apply(qpoints))[0]
-        got = PieceFit(covered=float((near < COVER * gap).mean()),
+        got = PieceFit(covered=_covered(tree, qpoints, f, COVER * gap),
                        residual=float(cost) / gap if gap > 0 else float("inf"), similarity=f)
         if best is None or (got.lies_on, got.covered) > (best.lies_on, best.covered):
             best = got
