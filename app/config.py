@@ -120,6 +120,9 @@ class Settings(BaseSettings):
     check_budget: BudgetSettings = Field(default_factory=lambda: BudgetSettings(timeout_s=30.0))
     explain_budget: BudgetSettings = Field(default_factory=lambda: BudgetSettings(queue=4, timeout_s=60.0))
     render_budget: BudgetSettings = Field(default_factory=lambda: BudgetSettings(timeout_s=20.0))
+    # pieces matched at once in the API process (services/piece_budget.py); timeout_s: the longest wait
+    piece_budget: BudgetSettings = Field(
+        default_factory=lambda: BudgetSettings(concurrency=2, timeout_s=10.0))
     client_requests: int = Field(default=8, ge=1)  # costly requests one client has in flight; more: 429
     ingest_timeout_s: float = Field(default=120.0, gt=0)  # wall clock of one ingest job; then failed
     worker_nice: int = Field(default=10, ge=0, le=19)  # ingestion yields the cores to searches

@@ -23,6 +23,7 @@ from app.services import query_pool, vocabularies
 from app.services.context import ServiceContext, open_context
 from app.services.live_index import LiveIndex
 from app.services.metrics import Metrics
+from app.services.piece_budget import PieceBudget
 from app.services.sweep import sweep_temp_files
 from app.storage import jobs as jobs_repo
 from app.storage import models as models_repo
@@ -51,7 +52,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         await asyncio.to_thread(metrics.skip_history, ctx)
         if settings.warm_up:  # in the background: startup does not wait for it
             asyncio.get_running_loop().run_in_executor(None, describer.warm_up)
-        app.state.runtime = Runtime(ctx, live, describer, workers, metrics)
+        pieces = PieceBudget(settings.piece_budget.concurrency, settings.piece_budget.queue,
+                             settings.piece_budget.timeout_s)
+        app.state.runtime = Runtime(ctx, live, describer, workers, metrics, pieces)
         poller = asyncio.create_task(_follow(ctx, live, workers))
         log.info("serving data dir %s: %s", ctx.data_dir, live.status())
         try:

@@ -42,8 +42,11 @@ def free_port() -> int:
 
 
 def start_server(
-    data_dir: Path, port: int, backend: str, log_path: Path, workers: int = 2
+    data_dir: Path, port: int, backend: str, log_path: Path, workers: int = 2,
+    overrides: dict[str, str] | None = None,
 ) -> subprocess.Popen:
+    """`shapebag serve` on data_dir; `overrides` replaces settings of the environment below (a
+    benchmark of refusals passes the served defaults of the per-client bound and the queue back)."""
     env = dict(
         os.environ,
         SHAPEBAG_DATA_DIR=str(data_dir),
@@ -59,6 +62,7 @@ def start_server(
         SHAPEBAG_CLIENT_REQUESTS="64",
         SHAPEBAG_SEARCH_QUEUE="64",
     )
+    env.update(overrides or {})
     log = open(log_path, "wb")  # noqa: SIM115 (the server process owns it until it exits)
     proc = subprocess.Popen(
         [

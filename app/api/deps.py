@@ -20,6 +20,7 @@ from app.config import Settings
 from app.services.context import ServiceContext
 from app.services.live_index import LiveIndex
 from app.services.metrics import Metrics
+from app.services.piece_budget import PieceBudget
 from app.services.query_pool import QueryDescriber
 from app.worker.processes import WorkerPool
 
@@ -33,6 +34,7 @@ class Runtime:
     describer: QueryDescriber
     workers: WorkerPool
     metrics: Metrics
+    pieces: PieceBudget  # the pieces matched at once in this process, and who waits
 
 
 def get_runtime(request: Request) -> Runtime:

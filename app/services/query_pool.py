@@ -201,7 +201,7 @@ class QueryDescriber:
         if not queue and self._may_start(kind):
             return self._start(kind, client)
         budget = self.budgets[kind]
-        if len(queue) >= budget.queue:
+        if len(queue) >= budget.queue and not self._displace(kind, client, what):
             raise PoolBusyError(f"{len(queue)} requests already wait for {what}; retry shortly")
         mine = sum(w.client == client for w in queue)
         if mine >= max(1, budget.queue // 2):  # one client never fills a kind's queue by itself
@@ -216,6 +216,25 @@ class QueryDescriber:
         except asyncio.CancelledError:  # the client went away while waiting
             self._abandon(kind, waiter)
             raise
+
+    def _displace(self, kind: str, client: str, what: str) -> bool:
+        """A full queue makes room for `client` when another client has at least 2 more requests
+        waiting in it: that client's newest waiter is told busy (503). So several clients that each
+        fill their half cannot lock a newcomer out; only a queue of many clients is full to all."""
+        queue = self._waiters[kind]
+        counts: dict[str, int] = {}
+        for w in queue:
+            counts[w.client] = counts.get(w.client, 0) + 1
+        heaviest = max(counts, key=lambda c: counts[c], default=None)
+        if heaviest is None or counts[heaviest] < counts.get(client, 0) + 2:
+            return False
+        victim = next(w for w in reversed(queue) if w.client == heaviest)
+        queue.remove(victim)
+        victim.future.set_exception(
+            PoolBusyError(f"{what}: your place in the queue went to another client's request; retry shortly"))
+        if heaviest not in self._running[kind] and not any(w.client == heaviest for w in queue):
+            self._served[kind].pop(heaviest, None)
+        return True
 
     def _abandon(self, kind: str, waiter: _Waiter) -> None:
         if waiter.future.done() and not waiter.future.cancelled():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass, replace
 
@@ -17,6 +18,7 @@ from app.services import partial as partial_mod
 from app.services.context import ServiceContext
 from app.services.errors import ConflictError, InvalidInputError, NotFoundError, NotReadyError
 from app.services.live_index import LiveIndex
+from app.services.piece_budget import PieceBudget
 from app.storage import models as models_repo
 from app.storage import vocabularies as vocab_repo
 from app.storage.models import ModelRecord
@@ -88,11 +90,12 @@ def _rows_search(live: LiveIndex, vector: np.ndarray, k: int, allowed: np.ndarra
 
 def search_description(
     ctx: ServiceContext, live: LiveIndex, description: ShapeDescription, k: int, label: str | None = None,
-    partial: bool | None = None,
+    partial: bool | None = None, gate: PieceBudget | None = None,
 ) -> SearchResult:
     """The k nearest models; a piece (partial, or None and the query has a rim) re-ranks its
-    candidates (app.services.partial) by their local signatures. Every hit carries forward / reverse
-    scores."""
+    candidates (app.services.partial) by their local signatures, holding a place of `gate` while it
+    does (the API's bound on pieces matched at once; None: no bound). Every hit carries forward /
+    reverse scores."""
     check_k(k)
     allowed = _allowed(ctx, label)
     piece = partial_mod.is_partial(description.local, partial)
@@ -120,12 +123,18 @@ def search_description(
         t = time.perf_counter()
         found = _hits(ctx, dist, ids, wanted, rerank, parts)
         work = partial_mod.Work(seconds={"records": time.perf_counter() - t})
-        hits = _scored(ctx, description.local, found, k, piece, work, vid)
+        with _place(gate, piece):
+            hits = _scored(ctx, description.local, found, k, piece, work, vid)
         seconds = {"encode": t_encode, "search": t_search, "partial": time.perf_counter() - t}
         # the partial stage's steps (hit records, coarse pass, full scoring, vote, regions)
         seconds.update({f"partial.{step}": v for step, v in work.seconds.items()})
         return SearchResult(hits, vid, seconds, work if description.local is not None else None)
     raise NotReadyError("the vocabulary is being swapped; retry")
+
+
+def _place(gate: PieceBudget | None, piece: bool) -> contextlib.AbstractContextManager[None]:
+    """A place of the API's bound on pieces matched at once, for a piece; nothing for a whole query."""
+    return gate.hold() if piece and gate is not None else contextlib.nullcontext()
 
 
 def _scored(ctx: ServiceContext, local: LocalSignature | None, hits: list[Hit], k: int,
@@ -159,13 +168,14 @@ def _scored(ctx: ServiceContext, local: LocalSignature | None, hits: list[Hit], 
 
 def similar(
     ctx: ServiceContext, live: LiveIndex, model_id: int, k: int, label: str | None = None,
-    partial: bool | None = None,
+    partial: bool | None = None, gate: PieceBudget | None = None,
 ) -> SearchResult:
     """Models nearest to a stored one (itself excluded), ranked as POST /search ranks the same mesh: a
     model with a rim (an open scan, a piece; partial None) or partial True is a piece, its candidates
     re-ranked by their local signatures (app.services.partial) with forward / reverse scores; otherwise
     the whole-shape ranking. Whole open scans gain by it (docs/partial.md: +2.4 to +3.0 mAP on the
-    held-out scan columns), so a stored scan is not ranked worse than its own upload would be."""
+    held-out scan columns), so a stored scan is not ranked worse than its own upload would be. A piece
+    holds a place of `gate` while it is matched, as search_description's."""
     check_k(k)
     t = time.perf_counter()
     allowed = _allowed(ctx, label)
@@ -205,7 +215,8 @@ def similar(
         t = time.perf_counter()
         found = _hits(ctx, dist[keep], ids[keep], int(keep.sum()))
         work = partial_mod.Work(seconds={"records": time.perf_counter() - t})
-        hits = _scored(ctx, local, found, k, True, work, vid)
+        with _place(gate, True):
+            hits = _scored(ctx, local, found, k, True, work, vid)
         seconds["partial"] = time.perf_counter() - t
         seconds.update({f"partial.{step}": v for step, v in work.seconds.items()})
         return SearchResult(hits, vid, seconds, work if local is not None else None)

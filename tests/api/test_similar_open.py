@@ -94,3 +94,53 @@ def test_an_open_models_similar_search_stops_at_the_scoring_deadline_and_says_so
         work, hits = r.json()["partial"], r.json()["data"]
         assert work["score_cut"] and work["scored"] == 1 < work["scored_of"]
         assert hits[0]["forward"] is not None and all(h["forward"] is None for h in hits[1:])
+
+
+def test_pieces_past_the_api_bound_are_busy_and_whole_queries_are_not(collection):
+    """With every place of the piece bound held and no queue, a piece's /similar answers 503 busy +
+    Retry-After at once; the same model's whole-shape ranking still answers; a freed place serves it."""
+    from app.config import BudgetSettings
+
+    data_dir, ids = collection
+    settings = make_settings(data_dir, describe=DESCRIBE,
+                             piece_budget=BudgetSettings(concurrency=1, queue=0, timeout_s=5.0))
+    with TestClient(create_app(settings)) as client:
+        pieces = client.app.state.runtime.pieces
+        with pieces.hold():  # another client's piece, being matched
+            r = client.get(f"/models/{ids['half']}/similar", params={"k": "5"})
+            assert r.status_code == 503, r.text
+            assert r.json()["error"]["code"] == "busy" and "Retry-After" in r.headers
+            assert _similar(client, ids["half"], partial="false")  # the whole-shape ranking: no place needed
+            r = client.post("/search", files={"file": ("q.obj", _obj(_half(_shapes()["quadruped"])))},
+                            data={"k": "5"})
+            assert r.status_code == 503 and r.json()["error"]["code"] == "busy"
+        hits = _similar(client, ids["half"])
+        assert hits[0]["model_id"] == ids["quadruped"] and pieces.active == 0
+
+
+def test_one_client_past_its_share_of_the_piece_queue_is_told_429(collection):
+    """The queue holds 2, a client at most 1 of them: its second waiting piece is refused 429 +
+    Retry-After by the per-client bound's middleware, and its first is served once the place frees."""
+    import threading
+
+    from app.config import BudgetSettings
+
+    data_dir, ids = collection
+    settings = make_settings(data_dir, describe=DESCRIBE,
+                             piece_budget=BudgetSettings(concurrency=1, queue=2, timeout_s=30.0))
+    with TestClient(create_app(settings)) as client:
+        pieces = client.app.state.runtime.pieces
+        answers: list[int] = []
+        with pieces.hold():
+            first = threading.Thread(target=lambda: answers.append(
+                client.get(f"/models/{ids['half']}/similar").status_code))
+            first.start()
+            for _ in range(500):
+                if pieces.waiting == 1:
+                    break
+                threading.Event().wait(0.01)
+            assert pieces.waiting == 1
+            r = client.get(f"/models/{ids['half']}/similar")
+            assert r.status_code == 429 and "Retry-After" in r.headers, r.text
+        first.join(60)
+        assert answers == [200] and pieces.active == 0 and pieces.waiting == 0

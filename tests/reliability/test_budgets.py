@@ -133,6 +133,28 @@ def test_one_client_fills_at_most_half_a_queue_and_the_least_served_client_goes_
     asyncio.run(scenario())
 
 
+def test_a_full_queue_makes_room_for_a_client_with_nothing_waiting(pool, tmp_path):
+    """Two clients fill the check queue (2 + 2 of 4): a third client's request takes the place of the
+    newest waiter of a client with 2 more waiting (503 busy), waits, and is served in its turn."""
+    async def scenario():
+        running = Held(pool, tmp_path, "r", "check", client="x")
+        await running.wait_started()
+        hogs = [Held(pool, tmp_path, f"h{i}", "check", client="hog") for i in (0, 1)]
+        await asyncio.sleep(0.2)
+        others = [Held(pool, tmp_path, f"o{i}", "check", client="other") for i in (0, 1)]
+        await asyncio.sleep(0.3)
+        assert pool.waiting("check") == 4
+        newcomer = Held(pool, tmp_path, "n", "check", client="newcomer")
+        with pytest.raises(PoolBusyError, match="another client"):
+            await hogs[1].task  # the hog's newest
+        assert pool.waiting("check") == 4 and not hogs[0].task.done()
+        left = (running, hogs[0], *others, newcomer)
+        results = await asyncio.gather(*(held.release() for held in left))  # each served in its turn
+        assert all(r > 0 for r in results)
+
+    asyncio.run(scenario())
+
+
 def test_the_deadline_counts_the_wait_and_frees_the_queue_place(pool, tmp_path):
     async def scenario():
         holder = Held(pool, tmp_path, "holder", "explain")

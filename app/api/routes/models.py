@@ -158,7 +158,7 @@ def similar(
     ] = "auto",
 ) -> SearchResponse:
     """The models nearest to a stored one, ranked as POST /search would rank its mesh."""
-    result = search.similar(runtime.ctx, runtime.live, model_id, k, label, PARTIAL[partial])
+    result = search.similar(runtime.ctx, runtime.live, model_id, k, label, PARTIAL[partial], runtime.pieces)
     return to_response(result, variants.relations_with(runtime.ctx, model_id))
 
 

@@ -57,7 +57,8 @@ async def search_mesh(request: Request, runtime: RuntimeDep) -> SearchResponse:
     seconds["describe"] = describe_wall
     label = form.fields.get("label") or None
     result = await run_in_threadpool(
-        search.search_description, runtime.ctx, runtime.live, description, k, label, PARTIAL[choice]
+        search.search_description, runtime.ctx, runtime.live, description, k, label, PARTIAL[choice],
+        runtime.pieces,
     )
     seconds.update(result.seconds)
     t = time.perf_counter()
