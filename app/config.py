@@ -128,6 +128,10 @@ class Settings(BaseSettings):
     worker_nice: int = Field(default=10, ge=0, le=19)  # ingestion yields the cores to searches
     worker_memory_mb: int = Field(default=4096, ge=0)  # RLIMIT_AS of worker and pool processes; 0: none
     upload_timeout_s: float = Field(default=30.0, gt=0)  # no body bytes for this long: 408
+    # a connection's request headers complete within this, or it is closed (shapebag serve)
+    header_timeout_s: float = Field(default=15.0, gt=0)
+    # past upload_timeout_s, a body arriving slower than this on average is given up (408); 0: no floor
+    upload_min_rate_kib_s: float = Field(default=8.0, ge=0)
     max_concurrent_uploads: int = Field(default=16, ge=1)  # request bodies read at once; more: 503
     warm_up: bool = True  # start the query pool at startup, so the first search does not pay for it
     admin_token: str = DEFAULT_ADMIN_TOKEN

@@ -11,6 +11,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.requests import ClientDisconnect
 from starlette.routing import Match
 
 from app.api.security import HEADERS as SECURITY_HEADERS
@@ -78,6 +79,14 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(UnsupportedFormatError)
     async def _format(request: Request, exc: UnsupportedFormatError) -> JSONResponse:
         return error_response(415, "unsupported_format", str(exc))
+
+    @app.exception_handler(ClientDisconnect)
+    async def _gone(request: Request, exc: ClientDisconnect) -> JSONResponse:
+        """The client closed its connection while its body was read: nothing to answer, and no
+        error of the server's. One line at INFO, no traceback (a client aborting uploads in a loop
+        wrote 2.4 MB/s of tracebacks as unhandled 500s; red team, 2026-12-05)."""
+        log.info("client went away during %s %s", request.method, request.url.path)
+        return error_response(400, "client_disconnected", "the connection closed before the body was read")
 
     @app.exception_handler(RequestValidationError)
     async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:

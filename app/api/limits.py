@@ -10,6 +10,7 @@ import asyncio
 import json
 import os
 import tempfile
+import time
 import unicodedata
 from pathlib import Path
 from typing import Annotated
@@ -19,7 +20,10 @@ from fastapi import Query
 
 from app.api.uploads import UploadForm
 from app.core.mesh import detect_format
+from app.services.clients import current_client
 from app.services.errors import InvalidInputError
+
+RETRY_AFTER_S = 2  # a client over its share of the upload slots: as the per-client bound's 429
 
 MAX_FILENAME_CHARS = 255
 MAX_TEXT_CHARS = 200  # name; label is held to 100 by ModelCreate on /models
@@ -41,6 +45,14 @@ def _odd_character(text: str) -> str | None:
         if what is not None:
             return f"{what} (U+{ord(ch):04X})"
     return None
+
+
+def check_text(name: str, value: str | None) -> None:
+    """InvalidInputError (422) for a text field holding a control, invisible formatting, surrogate or
+    private-use character (the rule of the form's name and label, for JSON bodies' text too)."""
+    odd = None if value is None else _odd_character(value)
+    if odd is not None:
+        raise InvalidInputError(f"{name}: contains {odd}")
 
 
 def check_filename(filename: str) -> str:
@@ -110,28 +122,40 @@ class RefuseEncodedBodies:
 
 
 class UploadStalled(Exception):
-    """Raised from `receive` when a request body makes no progress (never an OSError/TimeoutError,
-    which the app's own handlers would turn into a response first)."""
+    """Raised from `receive` when a request body makes no progress, or too little (never an
+    OSError/TimeoutError, which the app's own handlers would turn into a response first)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.message = message
 
 
 class GuardUploads:
     """ASGI middleware for request bodies (POST/PUT/PATCH): at most `max_concurrent` read at once (the
-    next is 503 + Retry-After before a byte is read) and `timeout_s` at most between two chunks (408).
+    next is 503 + Retry-After before a byte is read), at most a quarter of them for one client (the
+    ClientBudget's, app/services/clients.py: 429 + Retry-After), `timeout_s` at most between two chunks
+    and, past the first `timeout_s`, at least `min_rate` bytes a second on average (408).
 
     A stalled or trickling client used to hold its connection, and the memory of what it had sent,
-    for as long as it liked. The slot is freed as soon as the body is complete: what follows (the
-    query pool) has admission control of its own.
+    for as long as it liked; one address trickling a byte every 10 s into 16 bodies held every slot,
+    and every upload and search of every other client was 503 (red team, 2026-12-05). The slot is
+    freed as soon as the body is complete: what follows (the query pool) has admission control of its
+    own.
     """
 
     METHODS = ("POST", "PUT", "PATCH")
     DRAIN_BYTES = 1 << 20  # a refused body up to this size is read and dropped, so the 503 arrives
 
-    def __init__(self, app, max_concurrent: int, timeout_s: float, retry_after_s: int = 5) -> None:
+    def __init__(self, app, max_concurrent: int, timeout_s: float, retry_after_s: int = 5,
+                 min_rate: float = 0.0) -> None:
         self.app = app
         self.max_concurrent = max_concurrent
+        self.per_client = max(1, max_concurrent // 4)
         self.timeout_s = timeout_s
         self.retry_after_s = retry_after_s
+        self.min_rate = min_rate  # bytes a second, averaged from the start, checked past timeout_s
         self.active = 0
+        self.by_client: dict[str, int] = {}
 
     async def __call__(self, scope, receive, send) -> None:
         if scope["type"] != "http" or scope["method"] not in self.METHODS:
@@ -145,23 +169,43 @@ class GuardUploads:
             headers = {"Retry-After": str(self.retry_after_s)}
             await send_error(send, 503, "busy", message, headers, close=not drained)
             return
+        client = current_client()
+        if self.by_client.get(client, 0) >= self.per_client:
+            drained = await self._drain(receive)
+            message = f"{self.per_client} of your uploads are being received already; wait for them"
+            await send_error(send, 429, "too_many_requests", message, {"Retry-After": str(RETRY_AFTER_S)},
+                             close=not drained)
+            return
         self.active += 1
+        self.by_client[client] = self.by_client.get(client, 0) + 1
         state = {"reading": True, "started": False}
+        start, received = time.monotonic(), 0
 
         def done_reading() -> None:
             if state["reading"]:
                 state["reading"] = False
                 self.active -= 1
+                self.by_client[client] -= 1
+                if not self.by_client[client]:
+                    del self.by_client[client]
 
         async def timed_receive():
+            nonlocal received
             if not state["reading"]:  # the body is in: waiting for a disconnect is not a stall
                 return await receive()
             try:
                 message = await asyncio.wait_for(receive(), self.timeout_s)
             except TimeoutError:
-                raise UploadStalled from None
+                stalled = f"no upload data for {self.timeout_s:g} s: the request was given up"
+                raise UploadStalled(stalled) from None
+            received += len(message.get("body", b""))
             if message["type"] != "http.request" or not message.get("more_body", False):
                 done_reading()
+            else:
+                took = time.monotonic() - start
+                if self.min_rate > 0 and took > self.timeout_s and received < self.min_rate * took:
+                    raise UploadStalled(f"the upload arrived slower than {self.min_rate / 1024:g} KiB/s:"
+                                        " the request was given up")
             return message
 
         async def tracking_send(message) -> None:
@@ -171,10 +215,9 @@ class GuardUploads:
 
         try:
             await self.app(scope, timed_receive, tracking_send)
-        except UploadStalled:
+        except UploadStalled as exc:
             if not state["started"]:
-                message = f"no upload data for {self.timeout_s:g} s: the request was given up"
-                await send_error(send, 408, "upload_timeout", message)
+                await send_error(send, 408, "upload_timeout", exc.message)
         finally:
             done_reading()
 

@@ -71,6 +71,7 @@ def check_port_free(host: str, port: int) -> None:
 def serve(settings, processes: int = 1) -> int:
     import uvicorn
 
+    from app.api.header_deadline import HeaderDeadlineProtocol
     from app.config import DEFAULT_ADMIN_TOKEN
     from app.main import create_app
 
@@ -84,8 +85,10 @@ def serve(settings, processes: int = 1) -> int:
     if settings.dev_mode and settings.admin_token == DEFAULT_ADMIN_TOKEN:  # the README's admin calls need it
         token = DEFAULT_ADMIN_TOKEN
         print(f"shapebag: dev mode, admin token {token!r}: curl -H 'X-Admin-Token: {token}' ...")
+    os.environ["SHAPEBAG_HEADER_TIMEOUT_S"] = str(settings.header_timeout_s)  # read by the protocol
     if processes == 1:
-        uvicorn.run(app, host=settings.host, port=settings.port, log_level="info")
+        uvicorn.run(app, host=settings.host, port=settings.port, log_level="info",
+                    http=HeaderDeadlineProtocol)
         return 0
     # uvicorn starts each process from an import string (an app object cannot cross a process start):
     # the factory rebuilds Settings from the environment, so the flags travel as SHAPEBAG_* variables
@@ -104,5 +107,6 @@ def serve(settings, processes: int = 1) -> int:
         host=settings.host,
         port=settings.port,
         log_level="info",
+        http=HeaderDeadlineProtocol,
     )
     return 0

@@ -73,12 +73,23 @@ def links_of(conn: sqlite3.Connection, model_id: int) -> list[dict]:
     ]
 
 
+KEPT_DECISIONS = 10  # the latest decisions of one pair kept: a history, not an unbounded log
+
+
 def add_decision(conn: sqlite3.Connection, a: int, b: int, decision: str, note: str | None) -> str:
-    """Append a reviewer's decision about the pair (either order); returns its time."""
+    """Append a reviewer's decision about the pair (either order), keeping the pair's latest
+    KEPT_DECISIONS (a flood of decisions once grew the database by 574 rows a second and every
+    model page's read with it); returns its time."""
     now = utcnow()
+    low, high = min(a, b), max(a, b)
     conn.execute(
         "INSERT INTO variant_decisions (low_id, high_id, decision, note, created_at) VALUES (?, ?, ?, ?, ?)",
-        (min(a, b), max(a, b), decision, note, now),
+        (low, high, decision, note, now),
+    )
+    conn.execute(
+        "DELETE FROM variant_decisions WHERE low_id = ? AND high_id = ? AND seq NOT IN"
+        " (SELECT seq FROM variant_decisions WHERE low_id = ? AND high_id = ? ORDER BY seq DESC LIMIT ?)",
+        (low, high, low, high, KEPT_DECISIONS),
     )
     return now
 

@@ -295,3 +295,64 @@ def test_the_openapi_body_requires_a_binary_file_and_keeps_the_other_fields():
             },
         }
     }
+
+
+def test_a_form_of_many_parts_is_refused_once_it_passes_max_parts_and_reading_stops():
+    """930,000 empty fields in 50 MiB took the API process to 1.7 GB; MAX_PARTS parts pass, one more is
+    refused before the rest of the body is read."""
+    from app.api.uploads import MAX_PARTS
+
+    fields = [_field(f"f{i}".encode(), b"") for i in range(MAX_PARTS - 1)]
+    form = _read(_end(*fields, _file(b"v 0 0 0\n")), chunk=4096)
+    assert len(form.fields) == MAX_PARTS - 1 and form.file()[1] == b"v 0 0 0\n"
+    many = _end(*[_field(f"f{i}".encode(), b"") for i in range(20_000)], _file(b"v 0 0 0\n"))
+    request, sent = _request(many, chunk=4096)
+    with pytest.raises(InvalidInputError, match=f"more than {MAX_PARTS} parts"):
+        asyncio.run(read_form(request, max_bytes=len(many)))
+    assert len(sent) <= 2  # the refusal came within the first chunks, not after the whole body
+
+
+def test_a_boundary_the_parser_refuses_is_invalid_input_not_a_500():
+    """python-multipart's constructor refuses a boundary over 256 bytes (FormParserError)."""
+    long = "a" * 2000
+    body = (f"--{long}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"m.obj\"\r\n\r\n"
+            f"v\r\n--{long}--\r\n")
+    request, _ = _request(body.encode(), headers={"content-type": f"multipart/form-data; boundary={long}"})
+    with pytest.raises(InvalidInputError, match="malformed multipart"):
+        asyncio.run(read_form(request, max_bytes=100_000))
+
+
+def test_a_client_gone_mid_body_is_one_quiet_line_not_a_500(settings, caplog):
+    """The connection closes after part of the body: ClientDisconnect answered 400 client_disconnected,
+    logged once at INFO with no traceback (aborted uploads in a loop wrote megabytes of tracebacks)."""
+    import logging
+
+    from app.main import create_app
+
+    app = create_app(settings.model_copy(update={"workers": 0}))
+    messages = [{"type": "http.request", "body": f"--{BOUNDARY}\r\n".encode(), "more_body": True},
+                {"type": "http.disconnect"}]
+    sent: list[dict] = []
+
+    async def receive():
+        return messages.pop(0) if messages else {"type": "http.disconnect"}
+
+    async def send(message):
+        sent.append(message)
+
+    scope = {"type": "http", "method": "POST", "path": "/search", "raw_path": b"/search", "root_path": "",
+             "query_string": b"", "scheme": "http", "server": ("127.0.0.1", 80), "client": ("127.0.0.9", 5),
+             "http_version": "1.1",
+             "headers": [(b"content-type", f"multipart/form-data; boundary={BOUNDARY}".encode()),
+                         (b"host", b"x")]}
+
+    async def run():
+        async with app.router.lifespan_context(app):
+            await app(scope, receive, send)
+
+    with caplog.at_level(logging.INFO):
+        asyncio.run(run())
+    start = next(m for m in sent if m["type"] == "http.response.start")
+    assert start["status"] == 400
+    assert any("client went away during POST /search" in r.getMessage() for r in caplog.records)
+    assert not any(r.exc_info for r in caplog.records if r.levelno >= logging.ERROR)

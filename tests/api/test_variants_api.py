@@ -112,3 +112,34 @@ def test_search_hits_carry_the_relation_verified_for_the_query(data_dir, corpus)
         r = client.post("/search", files={"file": (other.name, other.read_bytes())}, data={"k": "20"})
         assert r.status_code == 200
         assert [h["model_id"] for h in r.json()["data"] if h["relation"] is not None] == []
+
+
+def test_decisions_keep_a_bounded_history_refuse_odd_notes_and_respect_the_disk_floor(data_dir, monkeypatch):
+    """A pair keeps its last KEPT_DECISIONS decisions, the latest shown; a note with a control or
+    bidi-override character is 422; under the storage floor a decision is 507 and stores nothing."""
+    from app.services import space
+    from app.storage.variants import KEPT_DECISIONS
+
+    with TestClient(create_app(make_settings(data_dir))) as client:
+        a, b = [m["id"] for m in client.get("/models", params={"limit": 2}).json()["data"]]
+        url = f"/models/{a}/variants/{b}/decision"
+        for i in range(KEPT_DECISIONS + 5):
+            decision = "keep_both" if i % 2 else "not_variant"
+            assert client.post(url, json={"decision": decision, "note": f"n{i}"}).status_code == 201
+        db = client.app.state.runtime.ctx.db
+        with db.read() as conn:
+            rows = conn.execute("SELECT note FROM variant_decisions WHERE low_id = ? AND high_id = ?"
+                                " ORDER BY seq", (min(a, b), max(a, b))).fetchall()
+        assert [r[0] for r in rows] == [f"n{i}" for i in range(5, KEPT_DECISIONS + 5)]
+        with db.read() as conn:
+            from app.storage import variants as variants_repo
+            assert variants_repo.decisions_of(conn, a)[b]["note"] == f"n{KEPT_DECISIONS + 4}"
+        for note in ("a\u0000b", "\u202e evil", "bell\u0007"):
+            r = client.post(url, json={"decision": "keep_both", "note": note})
+            assert r.status_code == 422 and "note: contains" in r.json()["error"]["message"], note
+        monkeypatch.setattr(space, "free_bytes", lambda path: 1024 * 1024)  # under the 512 MB floor
+        r = client.post(url, json={"decision": "keep_both", "note": "while full"})
+        assert r.status_code == 507 and r.json()["error"]["code"] == "insufficient_storage"
+        with db.read() as conn:
+            notes = [n for (n,) in conn.execute("SELECT note FROM variant_decisions").fetchall()]
+        assert "while full" not in notes and len(notes) == KEPT_DECISIONS

@@ -15,6 +15,7 @@ import httpx
 import pytest
 
 from app.api.limits import GuardUploads
+from app.services.clients import set_client
 from tests.reliability.helpers import MULTIPART_HEADERS, start_server
 
 
@@ -48,7 +49,9 @@ def _client(first: bytes, release: asyncio.Event | None):
     return receive
 
 
-async def _call(app, receive, method: str = "POST") -> list[dict]:
+async def _call(app, receive, method: str = "POST", client: str = "local") -> list[dict]:
+    """One request through `app` for `client` (as the ClientBudget middleware names it)."""
+    set_client(client)  # this task's own context
     out: list[dict] = []
 
     async def send(message):
@@ -81,7 +84,8 @@ def test_past_the_cap_the_next_upload_is_503_and_its_body_never_reaches_the_app(
 
     async def scenario():
         release = asyncio.Event()
-        held = [asyncio.ensure_future(_call(guard, _client(b"x", release))) for _ in range(2)]
+        held = [asyncio.ensure_future(_call(guard, _client(b"x", release), client=f"addr:{n}"))
+                for n in (1, 2)]
         while guard.active < 2:
             await asyncio.sleep(0)
         reads = []
@@ -135,3 +139,91 @@ def test_a_real_server_answers_a_stalled_upload_with_408(tmp_path):
     finally:
         server.stop()
     print(f"408 after {elapsed:.2f} s of silence (limit 1 s)")
+
+
+def test_one_client_holds_at_most_a_quarter_of_the_slots_and_others_still_get_theirs():
+    """16 slots: one address trickling into 4 bodies is told 429 for a 5th (the red team held all 16
+    from one address); another client's upload still gets a slot."""
+    guard = GuardUploads(_echo_app, max_concurrent=16, timeout_s=60)
+
+    async def scenario():
+        release = asyncio.Event()
+        held = [asyncio.ensure_future(_call(guard, _client(b"x", release), client="addr:hog"))
+                for _ in range(4)]
+        while guard.active < 4:
+            await asyncio.sleep(0)
+
+        async def small():
+            return {"type": "http.request", "body": b"", "more_body": False}
+
+        refused = await _call(guard, small, client="addr:hog")
+        assert _status(refused) == 429 and dict(refused[0]["headers"])[b"retry-after"] == b"2"
+        assert _status(await _call(guard, small, client="addr:other")) == 200
+        release.set()
+        assert [_status(m) for m in await asyncio.gather(*held)] == [200] * 4
+        assert guard.active == 0 and guard.by_client == {}
+        assert _status(await _call(guard, small, client="addr:hog")) == 200  # its share is back
+
+    asyncio.run(scenario())
+
+
+def test_a_trickle_under_the_rate_floor_is_given_up_after_the_grace_period():
+    """A byte every 50 ms never stalls past timeout_s (0.2 s) but arrives at 20 bytes/s: past the
+    grace period it is 408 and its slot is free; a body at a good rate is not touched."""
+    guard = GuardUploads(_echo_app, max_concurrent=1, timeout_s=0.2, min_rate=1024.0)
+
+    def trickle(chunk: bytes, every_s: float, count: int):
+        sent = []
+
+        async def receive():
+            await asyncio.sleep(every_s)
+            sent.append(1)
+            return {"type": "http.request", "body": chunk, "more_body": len(sent) < count}
+
+        return receive
+
+    async def scenario():
+        t = time.monotonic()
+        slow = await _call(guard, trickle(b"x", 0.05, 1000))
+        said = json.loads(slow[1]["body"])["error"]["message"]
+        assert _status(slow) == 408 and "slower than 1 KiB/s" in said
+        assert time.monotonic() - t < 2.0 and guard.active == 0
+        fast = await _call(guard, trickle(b"x" * 4096, 0.05, 10))  # 80 KiB/s for 0.5 s
+        assert _status(fast) == 200 and json.loads(fast[1]["body"])["size"] == 40960
+
+    asyncio.run(scenario())
+
+
+@pytest.mark.slow
+def test_a_real_server_closes_a_connection_whose_headers_never_finish(tmp_path):
+    """Slowloris: headers trickled and never finished are closed at SHAPEBAG_HEADER_TIMEOUT_S (uvicorn
+    alone waits forever: 20,000 such connections exhausted the process's descriptors); headers that
+    finish in time, and a keep-alive connection's second request, are answered."""
+    server, base = start_server(
+        tmp_path / "data", tmp_path / "s.log", SHAPEBAG_HEADER_TIMEOUT_S="1.5", SHAPEBAG_WORKERS="0"
+    )
+    try:
+        port = int(base.rsplit(":", 1)[1])
+        slow = socket.create_connection(("127.0.0.1", port), timeout=30)
+        t = time.monotonic()
+        slow.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n")
+        for _ in range(3):  # a byte now and then: it never finishes its headers
+            time.sleep(0.3)
+            slow.sendall(b"X")
+        got = slow.recv(4096)  # b"" once the server closes it
+        elapsed = time.monotonic() - t
+        slow.close()
+        assert got == b"" and 1.2 < elapsed < 10, (got[:100], elapsed)
+
+        ok = socket.create_connection(("127.0.0.1", port), timeout=30)
+        ok.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n")
+        time.sleep(0.5)
+        ok.sendall(b"\r\n")  # finished within the deadline
+        assert ok.recv(4096).startswith(b"HTTP/1.1 200")
+        time.sleep(1.0)  # past the first deadline's start, inside the keep-alive: a second request
+        ok.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n")
+        assert ok.recv(4096).startswith(b"HTTP/1.1 200")
+        ok.close()
+    finally:
+        server.stop()
+    print(f"unfinished headers closed after {elapsed:.2f} s (limit 1.5 s)")

@@ -7,7 +7,7 @@ from fastapi import APIRouter, status
 from fastapi.concurrency import run_in_threadpool
 
 from app.api.deps import CtxDep, UploadDep
-from app.api.limits import IdPath
+from app.api.limits import IdPath, check_text
 from app.api.schemas import (
     ErrorResponse,
     VariantDecision,
@@ -15,6 +15,7 @@ from app.api.schemas import (
     VariantPublic,
     VariantsPublic,
 )
+from app.api.space import RoomDep
 from app.services import variants
 
 router = APIRouter(prefix="/models", tags=["variants"])
@@ -36,9 +37,12 @@ def list_variants(model_id: IdPath, ctx: CtxDep) -> VariantsPublic:
     responses={**ERRORS, 401: ERRORS[404]},
 )
 async def decide(
-    model_id: IdPath, other_id: IdPath, body: VariantDecision, ctx: CtxDep, _: UploadDep
+    model_id: IdPath, other_id: IdPath, body: VariantDecision, ctx: CtxDep, _: UploadDep, __: RoomDep
 ) -> VariantDecisionPublic:
     """Record a reviewer's decision about the pair: `keep_both` or `not_variant`. It is kept (the latest
-    one shows on GET .../variants); the models themselves are never changed."""
+    one shows on GET .../variants, the pair's last ten are stored); the models themselves are never
+    changed. A write like an upload: the API token when one is set, and refused (507) when the data
+    directory is at its floor or quota."""
+    check_text("note", body.note)
     row = await run_in_threadpool(variants.decide, ctx, model_id, other_id, body.decision, body.note)
     return VariantDecisionPublic.model_validate(row)
