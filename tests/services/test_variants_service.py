@@ -49,6 +49,13 @@ def test_detect_links_both_ways_and_decisions_are_kept(db_url, tmp_path):  # noq
     variants.decide(ctx, a, b, "not_variant", "different revisions")
     variants.decide(ctx, b, a, "keep_both", None)  # either order names the same pair; the latest wins
     assert variants.variants_of(ctx, a)[0]["decision"]["decision"] == "keep_both"
+    from app.storage.variants import KEPT_DECISIONS
+
+    for i in range(KEPT_DECISIONS + 2):  # a pair keeps its latest KEPT_DECISIONS, on either engine
+        variants.decide(ctx, a, b, "keep_both", f"n{i}")
+    with ctx.db.read() as conn:
+        notes = [n for (n,) in conn.execute("SELECT note FROM variant_decisions ORDER BY seq").fetchall()]
+    assert notes == [f"n{i}" for i in range(2, KEPT_DECISIONS + 2)]
     with pytest.raises(InvalidInputError):
         variants.decide(ctx, a, b, "merge", None)
     with pytest.raises(InvalidInputError):
