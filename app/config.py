@@ -133,6 +133,7 @@ class Settings(BaseSettings):
     # past upload_timeout_s, a body arriving slower than this on average is given up (408); 0: no floor
     upload_min_rate_kib_s: float = Field(default=8.0, ge=0)
     max_concurrent_uploads: int = Field(default=16, ge=1)  # request bodies read at once; more: 503
+    client_uploads: int = Field(default=4, ge=1)  # of those, one client's at once; more: 429
     warm_up: bool = True  # start the query pool at startup, so the first search does not pay for it
     admin_token: str = DEFAULT_ADMIN_TOKEN
     api_token: str = ""  # set: POST /models and DELETE /models/{id} need it (or the admin token)

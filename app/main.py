@@ -80,7 +80,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(RefuseEncodedBodies)  # 415 for gzip/deflate bodies: nothing is ever inflated
     app.add_middleware(  # 503 past N bodies being read at once, 408 after a stall
         GuardUploads, max_concurrent=settings.max_concurrent_uploads, timeout_s=settings.upload_timeout_s,
-        min_rate=settings.upload_min_rate_kib_s * 1024,
+        min_rate=settings.upload_min_rate_kib_s * 1024, per_client=settings.client_uploads,
     )
     # outside the body guards (a refused client takes no upload slot), inside the edge (its 429s get the
     # security headers): names each request's client for the layers inside, answers its 429s

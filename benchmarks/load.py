@@ -362,7 +362,8 @@ def main(argv: list[str] | None = None) -> int:
             data_dir = Path(tmp) / "data"
             seed_data_dir(data_dir, files)
             # every client here connects from 127.0.0.1: one client to the server's per-client bound
-            proc, base = serve(data_dir, args.workers, {"SHAPEBAG_CLIENT_REQUESTS": str(2 * args.clients)})
+            proc, base = serve(data_dir, args.workers, {"SHAPEBAG_CLIENT_REQUESTS": str(2 * args.clients),
+                                                        "SHAPEBAG_CLIENT_UPLOADS": str(2 * args.clients)})
             pid = proc.pid
         try:
             if not args.no_hostile:

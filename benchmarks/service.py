@@ -61,6 +61,7 @@ def start_server(
         # queue's 503 (issue 20) would refuse it by design, and this measures capacity, not refusal
         SHAPEBAG_CLIENT_REQUESTS="64",
         SHAPEBAG_SEARCH_QUEUE="64",
+        SHAPEBAG_CLIENT_UPLOADS="64",
     )
     env.update(overrides or {})
     log = open(log_path, "wb")  # noqa: SIM115 (the server process owns it until it exits)

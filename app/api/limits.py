@@ -132,7 +132,8 @@ class UploadStalled(Exception):
 
 class GuardUploads:
     """ASGI middleware for request bodies (POST/PUT/PATCH): at most `max_concurrent` read at once (the
-    next is 503 + Retry-After before a byte is read), at most a quarter of them for one client (the
+    next is 503 + Retry-After before a byte is read), at most `per_client` of them (a quarter unless
+    told) for one client (the
     ClientBudget's, app/services/clients.py: 429 + Retry-After), `timeout_s` at most between two chunks
     and, past the first `timeout_s`, at least `min_rate` bytes a second on average (408).
 
@@ -147,10 +148,10 @@ class GuardUploads:
     DRAIN_BYTES = 1 << 20  # a refused body up to this size is read and dropped, so the 503 arrives
 
     def __init__(self, app, max_concurrent: int, timeout_s: float, retry_after_s: int = 5,
-                 min_rate: float = 0.0) -> None:
+                 min_rate: float = 0.0, per_client: int | None = None) -> None:
         self.app = app
         self.max_concurrent = max_concurrent
-        self.per_client = max(1, max_concurrent // 4)
+        self.per_client = per_client if per_client is not None else max(1, max_concurrent // 4)
         self.timeout_s = timeout_s
         self.retry_after_s = retry_after_s
         self.min_rate = min_rate  # bytes a second, averaged from the start, checked past timeout_s
