@@ -130,6 +130,9 @@ class Settings(BaseSettings):
     upload_timeout_s: float = Field(default=30.0, gt=0)  # no body bytes for this long: 408
     # a connection's request headers complete within this, or it is closed (shapebag serve)
     header_timeout_s: float = Field(default=15.0, gt=0)
+    # the reverse proxy's addresses (comma-separated, or "*") whose X-Forwarded-For names the client:
+    # the per-client bounds then see each user, not the proxy. Empty: the connection's own address
+    forwarded_allow_ips: str = ""
     # past upload_timeout_s, a body arriving slower than this on average is given up (408); 0: no floor
     upload_min_rate_kib_s: float = Field(default=8.0, ge=0)
     max_concurrent_uploads: int = Field(default=16, ge=1)  # request bodies read at once; more: 503

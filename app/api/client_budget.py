@@ -1,8 +1,9 @@
 """The bound per client: who a request is for, and how much costly work one client may have in flight.
 
 A client is its token when it presents a valid one (the API or admin token), else its address: a
-made-up token names no one, so it cannot buy a fresh budget. Behind a reverse proxy, run uvicorn with
---proxy-headers and --forwarded-allow-ips so the address is the client's, not the proxy's.
+made-up token names no one, so it cannot buy a fresh budget. Behind a reverse proxy, set
+SHAPEBAG_FORWARDED_ALLOW_IPS to the proxy's address (`shapebag serve` hands it to uvicorn) so the
+address is the client's, not the proxy's.
 """
 
 from __future__ import annotations

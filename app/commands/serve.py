@@ -86,9 +86,12 @@ def serve(settings, processes: int = 1) -> int:
         token = DEFAULT_ADMIN_TOKEN
         print(f"shapebag: dev mode, admin token {token!r}: curl -H 'X-Admin-Token: {token}' ...")
     os.environ["SHAPEBAG_HEADER_TIMEOUT_S"] = str(settings.header_timeout_s)  # read by the protocol
+    # X-Forwarded-For is believed only from the proxy named (uvicorn's own default trusts 127.0.0.1)
+    trusted = settings.forwarded_allow_ips.strip()
+    proxy: dict = {"proxy_headers": bool(trusted), "forwarded_allow_ips": trusted or None}
     if processes == 1:
         uvicorn.run(app, host=settings.host, port=settings.port, log_level="info",
-                    http=HeaderDeadlineProtocol)
+                    http=HeaderDeadlineProtocol, **proxy)
         return 0
     # uvicorn starts each process from an import string (an app object cannot cross a process start):
     # the factory rebuilds Settings from the environment, so the flags travel as SHAPEBAG_* variables
@@ -108,5 +111,6 @@ def serve(settings, processes: int = 1) -> int:
         port=settings.port,
         log_level="info",
         http=HeaderDeadlineProtocol,
+        **proxy,
     )
     return 0

@@ -5,6 +5,7 @@ a ClientOverBudget from the budgets becomes the same 429."""
 from __future__ import annotations
 
 import asyncio
+import time
 
 import httpx
 import pytest
@@ -194,3 +195,34 @@ def test_the_schema_lists_the_429_on_every_costly_operation_only(settings):
         assert "Retry-After" in answer["headers"], (path, method)
     assert "429" not in paths["/models"]["get"]["responses"]
     assert "429" not in paths["/models/{model_id}"]["get"]["responses"]
+
+
+@pytest.mark.parametrize("trusted", ["", "127.0.0.1"])
+def test_behind_a_named_proxy_each_forwarded_address_is_its_own_client(data_dir, tmp_path, trusted):
+    """SHAPEBAG_CLIENT_REQUESTS=1, one costly request held open (a body half sent) for X-Forwarded-For
+    10.0.0.1. With the proxy named (127.0.0.1), 10.0.0.2 is another client and is served while the
+    same 10.0.0.1 is 429; with none named, the header is ignored: everyone is 127.0.0.1, and 429."""
+    import socket
+
+    from tests.reliability.helpers import start_server
+
+    server, base = start_server(data_dir, tmp_path / "s.log", SHAPEBAG_WORKERS="0",
+                                SHAPEBAG_CLIENT_REQUESTS="1", SHAPEBAG_FORWARDED_ALLOW_IPS=trusted)
+    try:
+        port = int(base.rsplit(":", 1)[1])
+        held = socket.create_connection(("127.0.0.1", port), timeout=30)
+        held.sendall(b"POST /search HTTP/1.1\r\nHost: x\r\nX-Forwarded-For: 10.0.0.1\r\n"
+                     b"Content-Type: multipart/form-data; boundary=B\r\nContent-Length: 1000\r\n\r\n--B\r\n")
+        time.sleep(0.5)  # its request is in flight, its body half read
+        bad = b"not multipart"
+        with httpx.Client(base_url=base, timeout=30) as http:
+            other = http.post("/search", content=bad, headers={"X-Forwarded-For": "10.0.0.2"})
+            same = http.post("/search", content=bad, headers={"X-Forwarded-For": "10.0.0.1"})
+        held.close()
+    finally:
+        server.stop()
+    assert same.status_code == 429
+    if trusted:
+        assert other.status_code == 422, other.text[:200]  # its own client: served (a clear 422)
+    else:
+        assert other.status_code == 429  # the header names no one: one client, over its bound
