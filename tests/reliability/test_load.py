@@ -27,6 +27,7 @@ def test_fifty_clients_mixed_load_without_errors(data_dir, corpus, tmp_path):
         SHAPEBAG_CHECK_BUDGET__QUEUE="128",
         SHAPEBAG_MAX_CONCURRENT_UPLOADS="64",
         SHAPEBAG_CLIENT_REQUESTS="64",  # the 50 clients share one address: one client to the server
+        SHAPEBAG_CLIENT_UPLOADS="64",  # ... and one client's share of the body slots
     )
     try:
         meshes = Meshes([p for p, _ in corpus.files])
