@@ -11,6 +11,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
+
 REPO_ROOT = Path(__file__).resolve().parents[1]  # children run `python -m ...` from here
 RESULTS_DIR = Path(os.environ.get("SHAPEBAG_RESULTS", "results"))
 
@@ -27,6 +29,12 @@ def table(rows: Sequence[dict], columns: Sequence[str] | None = None, title: str
     lines.append("  ".join("-" * w for w in widths))
     lines += ["  ".join(v.rjust(w) for v, w in zip(row, widths, strict=True)) for row in cells]
     return "\n".join(lines) + "\n"
+
+
+def p50_p95(values: Sequence[float]) -> tuple[float, float]:
+    """The median and the 95th percentile of `values`; (nan, nan) for none."""
+    v = np.asarray(values, dtype=np.float64)
+    return (float(np.percentile(v, 50)), float(np.percentile(v, 95))) if len(v) else (np.nan, np.nan)
 
 
 def _fmt(value: object) -> str:

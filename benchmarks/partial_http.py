@@ -39,6 +39,7 @@ import httpx
 import numpy as np
 
 from app.datasets.folder import LabelledFile, read_labelled_folder
+from benchmarks.common import p50_p95
 from benchmarks.partial_served import sample
 from benchmarks.partial_spectra import _folder
 from benchmarks.service import fill_index, free_port, ingest, start_server, stop_server, wait_until
@@ -56,8 +57,9 @@ def _summary(name: str, walls: list[float], bodies: list[dict[str, Any]]) -> dic
     split = {key: float(np.median([b.get("seconds", {}).get(key, np.nan) for b in bodies]))
              for key in ("describe", "encode", "search", "partial", "partial.coarse", "partial.score",
                          "partial.fit")}
-    out = {"kind": name, "queries": len(w), "p50_s": float(np.percentile(w, 50)),
-           "p95_s": float(np.percentile(w, 95)), "max_s": float(w.max()), "server_p50_s": split,
+    p50, p95 = p50_p95(walls)
+    out = {"kind": name, "queries": len(w), "p50_s": p50, "p95_s": p95, "max_s": float(w.max()),
+           "server_p50_s": split,
            "partial_hits": int(sum(bool(b["data"]) and bool(b["data"][0].get("partial")) for b in bodies))}
     work = [b["partial"] for b in bodies if b.get("partial")]
     out["coarse_cut"] = sum(w["coarse_cut"] for w in work)

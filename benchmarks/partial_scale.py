@@ -58,6 +58,7 @@ from app.datasets.folder import LabelledFile, read_labelled_folder
 from app.services import partial as partial_mod
 from app.services import search as search_mod
 from app.services.context import ServiceContext
+from benchmarks.common import p50_p95
 from benchmarks.partial_served import described, sample
 from benchmarks.partial_spectra import _folder
 
@@ -213,14 +214,9 @@ def per_model_costs(ctx: ServiceContext, live: Any, pieces: Sequence[ShapeDescri
     return {"read_ms": float(np.median(read)), "match_ms": float(np.median(match)), "models": len(ids)}
 
 
-def _pct(values: Sequence[float]) -> tuple[float, float]:
-    v = np.asarray(values, dtype=np.float64)
-    return (float(np.percentile(v, 50)), float(np.percentile(v, 95))) if len(v) else (np.nan, np.nan)
-
-
 def _stages(runs: list[dict[str, Any]]) -> dict[str, tuple[float, float]]:
-    out = {s: _pct([r["seconds"].get(s, 0.0) for r in runs]) for s in STAGES}
-    out["call"] = _pct([r["wall"] for r in runs])
+    out = {s: p50_p95([r["seconds"].get(s, 0.0) for r in runs]) for s in STAGES}
+    out["call"] = p50_p95([r["wall"] for r in runs])
     return out
 
 

@@ -32,10 +32,9 @@ from pathlib import Path
 from typing import Any
 
 import httpx
-import numpy as np
 
 from app.datasets.folder import read_labelled_folder
-from benchmarks.common import table
+from benchmarks.common import p50_p95, table
 from benchmarks.hostile_load import Tally, client, request
 from benchmarks.partial_spectra import _folder
 from benchmarks.service import free_port, start_server, stop_server, wait_until
@@ -102,10 +101,9 @@ async def hostile(address: str, base: str, pieces: list[Path], ids: list[int], s
 def _rows(took: dict[str, list[float]], tally: Tally, phase: str) -> list[dict[str, Any]]:
     rows = []
     for kind, walls in sorted(took.items()):
-        w = np.asarray(walls)
-        rows.append({"phase": phase, "kind": kind, "answered": len(w), "p50_s": float(np.percentile(w, 50)),
-                     "p95_s": float(np.percentile(w, 95)), "max_s": float(w.max()),
-                     "codes": tally.codes.get(kind, {})})
+        p50, p95 = p50_p95(walls)
+        rows.append({"phase": phase, "kind": kind, "answered": len(walls), "p50_s": p50, "p95_s": p95,
+                     "max_s": max(walls), "codes": tally.codes.get(kind, {})})
     return rows
 
 
@@ -121,10 +119,9 @@ async def phase(base: str, seconds: float, n_hostile: int, wholes: list[Path], p
         *[hostile(f"127.0.0.{3 + h}", base, pieces, ids, stop, hostile_tally, cuts, piece_took)
           for h in range(n_hostile)],
     )
+    p50, p95 = p50_p95(piece_took)
     return {"normal": _rows(took, normal_tally, "hostile" if n_hostile else "quiet"),
-            "hostile_codes": hostile_tally.codes, "cuts": cuts,
-            "piece_p50_s": float(np.percentile(piece_took, 50)) if piece_took else float("nan"),
-            "piece_p95_s": float(np.percentile(piece_took, 95)) if piece_took else float("nan")}
+            "hostile_codes": hostile_tally.codes, "cuts": cuts, "piece_p50_s": p50, "piece_p95_s": p95}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import hmac
 import re
 
-from app.api.limits import drain, send_error
+from app.api.limits import RETRY_AFTER_S, drain, send_error
 from app.services.clients import ClientOverBudget, reset_client, set_client
 
 # the requests that cost a pool process or an upload (describe, check, explain, render), or several index
@@ -20,7 +20,6 @@ COSTLY = {
     "POST": re.compile(r"^/(search|models|explain|web/preview\.png)/?$"),
     "GET": re.compile(r"^/models/[^/]+/(explain|similar|thumbnail\.png)/?$"),
 }
-RETRY_AFTER_S = 2
 DRAIN_BYTES = 1 << 20
 
 

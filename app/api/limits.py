@@ -23,7 +23,7 @@ from app.core.mesh import detect_format
 from app.services.clients import current_client
 from app.services.errors import InvalidInputError
 
-RETRY_AFTER_S = 2  # a client over its share of the upload slots: as the per-client bound's 429
+RETRY_AFTER_S = 2  # a client over its share (the upload slots here, ClientBudget's requests): 429
 
 MAX_FILENAME_CHARS = 255
 MAX_TEXT_CHARS = 200  # name; label is held to 100 by ModelCreate on /models
@@ -82,9 +82,7 @@ def check_form(form: UploadForm, file_field: str = "file") -> None:
             continue
         if len(value) > MAX_TEXT_CHARS:
             raise InvalidInputError(f"{name}: longer than {MAX_TEXT_CHARS} characters")
-        odd = _odd_character(value)
-        if odd is not None:
-            raise InvalidInputError(f"{name}: contains {odd}")
+        check_text(name, value)
 
 
 async def send_error(
@@ -133,9 +131,9 @@ class UploadStalled(Exception):
 class GuardUploads:
     """ASGI middleware for request bodies (POST/PUT/PATCH): at most `max_concurrent` read at once (the
     next is 503 + Retry-After before a byte is read), at most `per_client` of them (a quarter unless
-    told) for one client (the
-    ClientBudget's, app/services/clients.py: 429 + Retry-After), `timeout_s` at most between two chunks
-    and, past the first `timeout_s`, at least `min_rate` bytes a second on average (408).
+    told) for one client (as app/services/clients.py names it: 429 + Retry-After), `timeout_s` at most
+    between two chunks and, past the first `timeout_s`, at least `min_rate` bytes a second on average
+    (408).
 
     A stalled or trickling client used to hold its connection, and the memory of what it had sent,
     for as long as it liked; one address trickling a byte every 10 s into 16 bodies held every slot,

@@ -23,7 +23,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 
-from app.services.clients import ClientOverBudget, current_client
+from app.services.clients import ClientOverBudget, client_share, current_client, displaced
 from app.services.errors import PoolBusyError
 
 
@@ -81,7 +81,7 @@ class PieceBudget:
             if len(self._waiting) >= self.queue and not self._displace(client):
                 raise PoolBusyError(f"{len(self._waiting)} requests already wait for {what}; retry shortly")
             mine = sum(w.client == client for w in self._waiting)
-            if mine >= max(1, self.queue // 2):  # one client never fills the queue by itself
+            if mine >= client_share(self.queue):  # one client never fills the queue by itself
                 raise ClientOverBudget(f"{mine} of your requests already wait for {what}; wait for them")
             me = _Waiter(client, next(self._turns))
             self._waiting.append(me)
@@ -106,19 +106,14 @@ class PieceBudget:
             self._dispatch()
 
     def _displace(self, client: str) -> bool:
-        """A full queue makes room for `client` when another client has at least 2 more requests
-        waiting: that client's newest waiter is told busy. Several clients that each fill their half
-        cannot lock a newcomer out (the query pool's queues do the same)."""
-        counts: dict[str, int] = {}
-        for w in self._waiting:
-            counts[w.client] = counts.get(w.client, 0) + 1
-        heaviest = max(counts, key=lambda c: counts[c], default=None)
-        if heaviest is None or counts[heaviest] < counts.get(client, 0) + 2:
+        """Room for `client` in a full queue (app.services.clients.displaced, the query pool's rule):
+        the waiter it takes the place of is told busy."""
+        j = displaced([w.client for w in self._waiting], client)
+        if j is None:
             return False
-        victim = next(w for w in reversed(self._waiting) if w.client == heaviest)
-        self._waiting.remove(victim)
+        victim = self._waiting.pop(j)
         victim.displaced = True
-        self._forget(heaviest)
+        self._forget(victim.client)
         self._lock.notify_all()
         return True
 

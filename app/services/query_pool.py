@@ -33,7 +33,7 @@ from typing import Any
 
 from app.config import Settings
 from app.core.pipeline import DescribeParams, ShapeDescription, describe
-from app.services.clients import ClientOverBudget, current_client
+from app.services.clients import ClientOverBudget, client_share, current_client, displaced
 from app.services.errors import (
     DescribeCrashedError,
     DescribeTimeoutError,
@@ -204,7 +204,7 @@ class QueryDescriber:
         if len(queue) >= budget.queue and not self._displace(kind, client, what):
             raise PoolBusyError(f"{len(queue)} requests already wait for {what}; retry shortly")
         mine = sum(w.client == client for w in queue)
-        if mine >= max(1, budget.queue // 2):  # one client never fills a kind's queue by itself
+        if mine >= client_share(budget.queue):  # one client never fills a kind's queue by itself
             raise ClientOverBudget(f"{mine} of your requests already wait for {what}; wait for them")
         waiter = _Waiter(client, asyncio.get_running_loop().create_future())
         queue.append(waiter)
@@ -218,22 +218,17 @@ class QueryDescriber:
             raise
 
     def _displace(self, kind: str, client: str, what: str) -> bool:
-        """A full queue makes room for `client` when another client has at least 2 more requests
-        waiting in it: that client's newest waiter is told busy (503). So several clients that each
-        fill their half cannot lock a newcomer out; only a queue of many clients is full to all."""
+        """Room for `client` in a full queue (app.services.clients.displaced): the waiter it takes the
+        place of is told busy (503)."""
         queue = self._waiters[kind]
-        counts: dict[str, int] = {}
-        for w in queue:
-            counts[w.client] = counts.get(w.client, 0) + 1
-        heaviest = max(counts, key=lambda c: counts[c], default=None)
-        if heaviest is None or counts[heaviest] < counts.get(client, 0) + 2:
+        j = displaced([w.client for w in queue], client)
+        if j is None:
             return False
-        victim = next(w for w in reversed(queue) if w.client == heaviest)
-        queue.remove(victim)
+        victim = queue.pop(j)
         victim.future.set_exception(
             PoolBusyError(f"{what}: your place in the queue went to another client's request; retry shortly"))
-        if heaviest not in self._running[kind] and not any(w.client == heaviest for w in queue):
-            self._served[kind].pop(heaviest, None)
+        if victim.client not in self._running[kind] and not any(w.client == victim.client for w in queue):
+            self._served[kind].pop(victim.client, None)
         return True
 
     def _abandon(self, kind: str, waiter: _Waiter) -> None:

@@ -203,3 +203,17 @@ def test_background_kinds_run_niced_and_leave_the_process_at_its_priority(pool):
     base, niced, plain = asyncio.run(scenario())
     assert niced == [min(19, base + 10)] * 2
     assert plain == [base] * 3  # the same processes served the renders: they kept their own priority
+
+
+def test_the_displacement_rule_on_hand_made_queues():
+    """app.services.clients.displaced, the rule both the query pool and the piece budget admit by: the
+    newest waiter of the client with most waiting, when it has at least 2 more than the newcomer."""
+    from app.services.clients import client_share, displaced
+
+    assert displaced([], "new") is None
+    assert displaced(["a", "b", "a", "b"], "new") == 2  # a and b tie at 2: a, counted first, gives its newest
+    assert displaced(["a", "b", "b", "a", "b"], "new") == 4  # b has most
+    assert displaced(["a", "b", "a", "b"], "a") is None  # a already waits 2: no room made for a third
+    assert displaced(["a", "b", "c", "d"], "new") is None  # one each: full to all
+    assert displaced(["a", "a", "a", "n"], "n") == 2  # 3 against 1: still 2 more
+    assert [client_share(q) for q in (0, 1, 2, 8, 9)] == [1, 1, 1, 4, 4]
